@@ -1,0 +1,37 @@
+# Shared build settings and the helpers every module uses.
+
+if(TWINFORGE_SANITIZE)
+  add_compile_options(-fsanitize=address,undefined -fno-omit-frame-pointer)
+  add_link_options(-fsanitize=address,undefined)
+endif()
+
+get_filename_component(TWINFORGE_SOURCE_DIR ${CMAKE_CURRENT_LIST_DIR}/.. ABSOLUTE)
+
+# twinforge_module(<name> SOURCES ... DEPS ...): the library of one src/<name> module.
+function(twinforge_module name)
+  cmake_parse_arguments(ARG "" "" "SOURCES;DEPS" ${ARGN})
+  add_library(twinforge_${name} STATIC ${ARG_SOURCES})
+  target_include_directories(twinforge_${name} PUBLIC ${TWINFORGE_SOURCE_DIR}/src)
+  target_link_libraries(twinforge_${name} PUBLIC ${ARG_DEPS})
+  target_compile_options(twinforge_${name} PRIVATE -Wall -Wextra)
+  target_compile_definitions(twinforge_${name}
+    PUBLIC TWINFORGE_ASSETS_DIR="${TWINFORGE_SOURCE_DIR}/assets")
+endfunction()
+
+# twinforge_test(<file_test.cpp> DEPS ... [LABELS ...]): one gtest file beside its code.
+function(twinforge_test file)
+  if(NOT TWINFORGE_BUILD_TESTS)
+    return()
+  endif()
+  cmake_parse_arguments(ARG "" "" "DEPS;LABELS" ${ARGN})
+  get_filename_component(stem ${file} NAME_WE)
+  get_filename_component(module ${CMAKE_CURRENT_SOURCE_DIR} NAME)
+  set(target ${module}_${stem})
+  add_executable(${target} ${file})
+  target_link_libraries(${target} PRIVATE ${ARG_DEPS} GTest::gtest GTest::gtest_main)
+  target_compile_definitions(${target} PRIVATE
+    TWINFORGE_TEST_DATA_DIR="${TWINFORGE_SOURCE_DIR}/tests/fixtures")
+  include(GoogleTest)
+  gtest_discover_tests(${target} PROPERTIES LABELS "${module};${ARG_LABELS}"
+    DISCOVERY_TIMEOUT 60)
+endfunction()

@@ -1,0 +1,33 @@
+// twinforge: real scene -> digital twin -> robust policy -> real robot.
+#include <CLI/CLI.hpp>
+#include <iostream>
+
+#include "app/doctor.h"
+#include "core/error.h"
+#include "core/log.h"
+#include "learn/torch_runtime.h"
+
+int main(int argc, char** argv) {
+  using namespace twinforge;
+  // Before any tensor work: one BLAS thread per process (see learn/torch_runtime.h).
+  learn::PinMathThreads(1);
+
+  CLI::App app{"twinforge: real scene -> digital twin -> robust policy -> real robot"};
+  app.require_subcommand(1);
+  std::string log_level = "info";
+  app.add_option("--log-level", log_level, "trace, debug, info, warn, error, critical, off");
+
+  auto* doctor = app.add_subcommand("doctor", "check dependencies, BLAS and threads");
+  int exit_code = 0;
+  doctor->callback([&] { exit_code = app::RunDoctor(std::cout); });
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  } catch (const core::Error& e) {
+    spdlog::error("{}", e.what());
+    return 2;
+  }
+  return exit_code;
+}

@@ -1,0 +1,36 @@
+#include "core/progress.h"
+
+#include <gtest/gtest.h>
+
+#include <thread>
+
+namespace twinforge::core {
+namespace {
+
+TEST(Progress, LineShowsStageStepRateAndEta) {
+  Progress progress("rl", 100, "episodes");
+  progress.set_interactive(false);
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  progress.Advance(25, "success 0.40");
+  const std::string line = progress.Line();
+  EXPECT_NE(line.find("rl  25/100 episodes (25%)"), std::string::npos) << line;
+  EXPECT_NE(line.find("/s"), std::string::npos) << line;
+  EXPECT_NE(line.find("ETA"), std::string::npos) << line;
+  EXPECT_NE(line.find("success 0.40"), std::string::npos) << line;
+  EXPECT_GT(progress.rate(), 0.0);
+}
+
+TEST(Progress, UnknownTotalHasNoEta) {
+  Progress progress("scan", 0, "frames");
+  progress.set_interactive(false);
+  progress.Advance(3);
+  EXPECT_EQ(progress.Line().find("ETA"), std::string::npos);
+}
+
+TEST(Progress, FormatsDurations) {
+  EXPECT_EQ(FormatDuration(62), "1:02");
+  EXPECT_EQ(FormatDuration(3723), "1:02:03");
+}
+
+}  // namespace
+}  // namespace twinforge::core

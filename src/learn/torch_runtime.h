@@ -1,0 +1,30 @@
+// LibTorch's math runtime: which BLAS it resolved to, and how many threads it may use.
+//
+// Debian's LibTorch calls whatever libblas.so.3 the alternatives system points to. The reference
+// BLAS is ~14x slower than OpenBLAS for our networks, and OpenBLAS left multi-threaded on a
+// 2-core machine that also steps environments is ~20x slower again: every twinforge process pins
+// its math to one thread at start-up and parallelises across environments and processes instead.
+#pragma once
+
+#include <string>
+
+namespace twinforge::learn {
+
+struct BlasInfo {
+  std::string library;  // file that provides sgemm_, e.g. .../openblas-pthread/libblas.so.3
+  std::string vendor;   // "openblas", "reference", "mkl", "blis" or "unknown"
+  int threads = 0;      // BLAS threads (OpenBLAS only; 0 if unknown)
+};
+
+// Pins OpenBLAS and LibTorch's intra-op pool to `threads` and exports OPENBLAS_NUM_THREADS for
+// child processes. Call once at start-up, before any tensor work.
+void PinMathThreads(int threads = 1);
+
+// The BLAS that sgemm_ resolves to in this process.
+BlasInfo QueryBlas();
+
+// LibTorch's version, e.g. "1.13.1", and its intra-op thread count.
+std::string TorchVersion();
+int TorchThreads();
+
+}  // namespace twinforge::learn

@@ -1,0 +1,58 @@
+#include "pipeline/run_directory.h"
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+#include "core/error.h"
+#include "core/fs.h"
+
+namespace twinforge::pipeline {
+namespace {
+
+std::filesystem::path FreshDir(const std::string& name) {
+  const auto dir = std::filesystem::temp_directory_path() / name;
+  std::filesystem::remove_all(dir);
+  return dir;
+}
+
+TEST(RunDirectory, StageIsSkippedOnlyWhenInputsAndOutputsAreUnchanged) {
+  const auto dir = FreshDir("twinforge_run_dir_test");
+  {
+    RunDirectory run(dir);
+    EXPECT_FALSE(run.UpToDate("bc", "abc"));
+    core::WriteFileAtomic(run / "policies/bc.pt", "weights");
+    run.Record("bc", {"abc", {"policies/bc.pt"}, 1.5, ""});
+    EXPECT_TRUE(run.UpToDate("bc", "abc"));
+    EXPECT_FALSE(run.UpToDate("bc", "changed"));
+  }
+  // A new process (resume) sees the same manifest.
+  RunDirectory resumed(dir);
+  EXPECT_TRUE(resumed.UpToDate("bc", "abc"));
+  std::filesystem::remove(dir / "policies/bc.pt");
+  EXPECT_FALSE(resumed.UpToDate("bc", "abc"));
+  EXPECT_TRUE(std::filesystem::exists(dir / "log.txt"));
+}
+
+TEST(RunDirectory, MalformedManifestIsAClearError) {
+  const auto dir = FreshDir("twinforge_run_dir_bad");
+  core::WriteFileAtomic(dir / "manifest.json", R"({"stages": {"bc": {"inputs_hash": 3}}})");
+  try {
+    RunDirectory run(dir);
+    FAIL();
+  } catch (const core::ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("manifest.json"), std::string::npos) << e.what();
+  }
+}
+
+TEST(Fingerprint, ChangesWithFileContents) {
+  const auto dir = FreshDir("twinforge_fingerprint");
+  core::WriteFileAtomic(dir / "a.txt", "one");
+  const std::string before = Fingerprint().Add("cfg").AddFile(dir / "a.txt").Hex();
+  EXPECT_EQ(before, Fingerprint().Add("cfg").AddFile(dir / "a.txt").Hex());
+  core::WriteFileAtomic(dir / "a.txt", "two");
+  EXPECT_NE(before, Fingerprint().Add("cfg").AddFile(dir / "a.txt").Hex());
+}
+
+}  // namespace
+}  // namespace twinforge::pipeline

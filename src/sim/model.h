@@ -1,0 +1,33 @@
+// Loading MuJoCo models with errors a user can act on, and owning them safely.
+#pragma once
+
+#include <mujoco/mujoco.h>
+
+#include <filesystem>
+#include <memory>
+#include <string>
+
+namespace twinforge::sim {
+
+struct ModelDeleter {
+  void operator()(mjModel* m) const { mj_deleteModel(m); }
+};
+struct DataDeleter {
+  void operator()(mjData* d) const { mj_deleteData(d); }
+};
+using ModelPtr = std::unique_ptr<mjModel, ModelDeleter>;
+using DataPtr = std::unique_ptr<mjData, DataDeleter>;
+
+// Compiles an MJCF file. Throws core::IoError if missing, core::ConfigError with MuJoCo's
+// message (element, line) if it does not compile.
+ModelPtr LoadModel(const std::filesystem::path& path);
+
+// Compiles MJCF text (no relative asset paths); `origin` names it in errors.
+ModelPtr LoadModelFromText(const std::string& xml, const std::string& origin = "<inline MJCF>");
+
+DataPtr MakeData(const mjModel* m);
+
+// "2.2.2"
+std::string MujocoVersion();
+
+}  // namespace twinforge::sim
