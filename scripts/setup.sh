@@ -10,7 +10,7 @@ packages=(
   # core
   libeigen3-dev nlohmann-json3-dev libyaml-cpp-dev libhdf5-dev libcli11-dev libspdlog-dev libfmt-dev
   # sim (MuJoCo's CMake config needs qhull)
-  libmujoco-dev libqhull-dev libpng-dev
+  libmujoco-dev libqhull-dev libpng-dev libtinyxml2-dev
   # learn (LibTorch links libblas.so.3: OpenBLAS must be the one it resolves)
   libtorch-dev libopenblas0-pthread
   # real2sim

@@ -3,6 +3,7 @@
 #include <iostream>
 
 #include "app/doctor.h"
+#include "app/sim_commands.h"
 #include "core/error.h"
 #include "core/log.h"
 #include "learn/torch_runtime.h"
@@ -20,6 +21,7 @@ int main(int argc, char** argv) {
   auto* doctor = app.add_subcommand("doctor", "check dependencies, BLAS and threads");
   int exit_code = 0;
   doctor->callback([&] { exit_code = app::RunDoctor(std::cout); });
+  app::AddSimCommands(app, exit_code);
 
   try {
     app.parse(argc, argv);

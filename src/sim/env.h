@@ -1,0 +1,103 @@
+// One simulated episode at a time of a task: reset with randomization, step with an action,
+// observe privileged state or proprioception, check success.
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "core/rng.h"
+#include "core/se3.h"
+#include "sim/action.h"
+#include "sim/task.h"
+
+namespace twinforge::sim {
+
+struct StepResult {
+  float reward = 0;  // sparse: 1 while the task's success predicates all hold
+  bool success = false;
+  bool done = false;      // horizon reached, or the simulation went unstable
+  bool unstable = false;  // physics diverged (MuJoCo reset the state); the episode is void
+};
+
+// Proprioception: tool position (3) and quaternion w,x,y,z (4) in the robot base frame, finger
+// joint positions (2).
+constexpr int kProprioDim = 9;
+
+class Env {
+ public:
+  // `env_id` only names the env in messages; randomness comes from the seed given to Reset.
+  explicit Env(std::shared_ptr<const Task> task, int env_id = 0);
+
+  // Restores the nominal model and full state (qpos, qvel, act, ctrl, mocap, warm-start,
+  // applied forces, time), then draws this episode's randomization for `level` (0 = nominal,
+  // 1 = poses, 2 = + distractors, 3 = + disturbances) from an RNG seeded with `seed`.
+  void Reset(uint64_t seed, int level);
+
+  // Applies one action for one control period. Throws core::NumericError on NaN/inf input.
+  StepResult Step(const Action& action);
+
+  // Whether every success predicate holds now.
+  bool Success() const;
+
+  // Privileged state: proprioception, then per object position (3) and quaternion (4), then per
+  // task joint its value; all in the robot base frame. Sizes are fixed per task.
+  int state_dim() const {
+    return kProprioDim + 7 * int(task_->index().object_bodies.size()) +
+           int(task_->index().state_joints.size());
+  }
+  void State(float* out) const;
+  void Proprio(float* out) const;
+
+  // Tool pose in the robot base frame, arm joints, finger joints.
+  core::Pose EePose() const;
+  ArmVector ArmPositions() const;
+  double FingerOpening() const;  // mean of the two finger joints (m)
+
+  // Pose of a site in the robot base frame.
+  core::Pose SitePose(int site) const;
+  // Robot base pose in the world.
+  const core::Pose& base() const { return base_; }
+
+  const Task& task() const { return *task_; }
+  const mjModel* model() const { return model_.get(); }
+  const mjData* data() const { return data_.get(); }
+  mjData* mutable_data() { return data_.get(); }
+  const Kinematics& kinematics() const { return kinematics_; }
+  const GripperState& gripper() const { return gripper_; }
+  int steps() const { return steps_; }
+  int level() const { return level_; }
+  core::Rng& rng() { return rng_; }
+
+ private:
+  struct ActiveDisturbance {
+    int body = -1, dof = -1;
+    Eigen::Vector3d force = Eigen::Vector3d::Zero();
+    double generalized = 0;
+    int start_substep = 0, end_substep = 0;
+  };
+
+  void RestoreNominalModel();
+  void RandomizePoses();
+  void PlaceDistractors();
+  void ScheduleDisturbances();
+  void RandomizePhysics();
+  void ApplyForces(int substep);
+
+  std::shared_ptr<const Task> task_;
+  int env_id_;
+  ModelPtr model_;  // this env's copy: randomization edits it
+  DataPtr data_;
+  Kinematics kinematics_;
+  core::Pose base_;
+  core::Rng rng_;
+  GripperState gripper_;
+  int steps_ = 0;
+  int level_ = 0;
+  int substep_count_ = 0;
+  std::vector<ActiveDisturbance> disturbances_;
+  std::vector<int> robot_dofs_;
+  int last_bad_qacc_ = 0;
+};
+
+}  // namespace twinforge::sim

@@ -1,0 +1,241 @@
+#include "sim/expert.h"
+
+#include <cmath>
+
+namespace twinforge::sim {
+
+namespace {
+
+// Tool orientation with z along `approach` and y along `fingers` (made orthogonal to it).
+core::Quat ToolOrientation(const Eigen::Vector3d& approach, const Eigen::Vector3d& fingers) {
+  const Eigen::Vector3d z = approach.normalized();
+  const Eigen::Vector3d y = (fingers - fingers.dot(z) * z).normalized();
+  Eigen::Matrix3d r;
+  r << y.cross(z), y, z;
+  return core::Quat(r).normalized();
+}
+
+// A frame at `pose` keeping only its heading: z up, x along pose's x projected on the table.
+core::Pose YawFrame(const core::Pose& pose) {
+  const Eigen::Matrix3d r = pose.rotation.toRotationMatrix();
+  return {pose.translation, core::Yaw(std::atan2(r(1, 0), r(0, 0)))};
+}
+
+}  // namespace
+
+ScriptedExpert::ScriptedExpert(const Task& task, double noise) : task_(task), noise_(noise) {}
+
+void ScriptedExpert::Reset() {
+  step_ = 0;
+  steps_in_step_ = 0;
+  last_move_ = -1;
+}
+
+void ScriptedExpert::Advance() {
+  ++step_;
+  steps_in_step_ = 0;
+  last_move_ = -1;
+}
+
+core::Pose ScriptedExpert::Target(const Env& env, const ExpertStep& step) {
+  const core::Pose anchor = step.site.empty()
+                                ? core::Pose::Identity()
+                                : YawFrame(env.SitePose(task_.Id(mjOBJ_SITE, step.site, "site")));
+  core::Pose target;
+  target.translation = anchor * Eigen::Vector3d(step.offset.data());
+  const core::Quat frame = step.world_orientation ? core::Quat::Identity() : anchor.rotation;
+  const Eigen::Vector3d approach = frame * Eigen::Vector3d(step.approach.data());
+  const Eigen::Vector3d fingers = frame * Eigen::Vector3d(step.fingers.data());
+  // A parallel gripper is symmetric: of the two finger directions take the one nearer the tool
+  // when the step starts, and keep it for the whole step.
+  const core::Quat a = ToolOrientation(approach, fingers), b = ToolOrientation(approach, -fingers);
+  if (steps_in_step_ == 0) {
+    const core::Quat now = env.EePose().rotation;
+    flip_fingers_ = core::AngleBetween(b, now) < core::AngleBetween(a, now);
+  }
+  target.rotation = flip_fingers_ ? b : a;
+  return target;
+}
+
+Action ScriptedExpert::HoldStill(const Env& env) const {
+  if (task_.spec().control.action == ActionMode::kDiscrete)
+    return Action::Discrete(env.gripper().closure > 0.5 ? 13 : 12);  // re-issue the gripper state
+  Action a = Action::Continuous({});
+  a.value[6] = 2.0 * env.gripper().closure - 1.0;
+  return a;
+}
+
+Action ScriptedExpert::Toward(const Env& env, const core::Pose& target, double closure) {
+  const auto& limits = task_.spec().control.limits;
+  const core::Pose ee = env.EePose();
+  const Eigen::Matrix3d to_tool = ee.rotation.toRotationMatrix().transpose();
+  const Eigen::Vector3d dp = to_tool * (target.translation - ee.translation);
+  const Eigen::Vector3d dr = to_tool * core::LogMap(target.rotation * ee.rotation.conjugate());
+  if (task_.spec().control.action == ActionMode::kDiscrete) {
+    // Gripper first; then the move that most reduces the error, measured in steps (a 3 cm move
+    // and a 0.2 rad turn count the same). None helping means the target is as close as the
+    // move grid allows: the caller moves on.
+    if ((closure > 0.5) != (env.gripper().closure > 0.5))
+      return Action::Discrete(closure > 0.5 ? 13 : 12);
+    const Eigen::Vector3d t = dp / limits.translation, r = dr / limits.rotation;
+    const double now = t.squaredNorm() + r.squaredNorm();
+    int best = -1;
+    double best_error = now - 1e-9;
+    for (int move = 0; move < 12; ++move) {
+      Eigen::Vector3d t2 = t, r2 = r;
+      const double sign = move % 2 == 0 ? 1.0 : -1.0;
+      if (move < 6)
+        t2[move / 2] -= sign;
+      else
+        r2[(move - 6) / 2] -= sign;
+      const double error = t2.squaredNorm() + r2.squaredNorm();
+      if (error < best_error) best_error = error, best = move;
+    }
+    // Undoing the previous move would only oscillate around the target.
+    const bool undo =
+        steps_in_step_ > 0 && last_move_ >= 0 && best >= 0 && (best ^ 1) == last_move_;
+    if (best < 0 || undo) {
+      at_grid_target_ = true;
+      return HoldStill(env);
+    }
+    last_move_ = best;
+    return Action::Discrete(best);
+  }
+  Action a = Action::Continuous({});
+  for (int k = 0; k < 3; ++k) {
+    a.value[k] = std::clamp(dp[k], -limits.translation, limits.translation);
+    a.value[3 + k] = std::clamp(dr[k], -limits.rotation, limits.rotation);
+  }
+  a.value[6] = 2.0 * closure - 1.0;
+  return a;
+}
+
+Action ScriptedExpert::Act(const Env& env, core::Rng& rng) {
+  const auto& steps = task_.spec().expert.steps;
+  while (!finished()) {
+    const ExpertStep& step = steps[step_];
+    double closure = env.gripper().closure;
+    if (step.gripper == GripCommand::kOpen) closure = 0.0;
+    if (step.gripper == GripCommand::kClose) closure = 1.0;
+    if (steps_in_step_ >= step.max_steps) {
+      Advance();  // give up on this step; later steps may still recover
+      continue;
+    }
+    Action action;
+    if (step.type == ExpertStepType::kGrip) {
+      if (steps_in_step_ >= step.hold) {
+        Advance();
+        continue;
+      }
+      ++steps_in_step_;
+      return task_.spec().control.action == ActionMode::kDiscrete
+                 ? Action::Discrete(closure > 0.5 ? 13 : 12)
+                 : Toward(env, env.EePose(), closure);
+    }
+    if (step.type == ExpertStepType::kMove) {
+      const core::Pose target = Target(env, step);
+      const core::Pose ee = env.EePose();
+      const bool gripper_ready = (closure > 0.5) == (env.gripper().closure > 0.5);
+      if ((target.translation - ee.translation).norm() < step.tolerance &&
+          core::AngleBetween(target.rotation, ee.rotation) < step.rotation_tolerance &&
+          gripper_ready) {
+        Advance();
+        continue;
+      }
+      at_grid_target_ = false;
+      action = Toward(env, target, closure);
+      if (at_grid_target_) {
+        Advance();
+        continue;
+      }
+    } else {  // drive a joint by moving the grasped part ahead of the grasp
+      const mjModel* m = env.model();
+      const mjData* d = env.data();
+      const int joint = task_.Id(mjOBJ_JOINT, step.joint, "joint");
+      const int site = task_.Id(mjOBJ_SITE, step.site, "site");
+      const double value = d->qpos[m->jnt_qposadr[joint]];
+      const core::Pose site_pose = env.SitePose(site);
+      if (steps_in_step_ == 0) grasp_in_site_ = site_pose.Inverse() * env.EePose();
+      const double remaining = step.to - value;
+      if (std::abs(remaining) < 0.005) {
+        Advance();
+        continue;
+      }
+      const double lead = std::copysign(std::min(step.lead, std::abs(remaining) + 0.01), remaining);
+      const core::Pose to_base = env.base().Inverse();
+      const Eigen::Vector3d axis = to_base.rotation * Eigen::Vector3d(d->xaxis + 3 * joint);
+      core::Pose ahead;
+      if (m->jnt_type[joint] == mjJNT_SLIDE) {
+        ahead.translation = axis * lead;
+      } else {
+        const Eigen::Vector3d anchor = to_base * Eigen::Vector3d(d->xanchor + 3 * joint);
+        ahead.rotation = core::AxisAngle(axis, lead);
+        ahead.translation = anchor - ahead.rotation * anchor;
+      }
+      action = Toward(env, ahead * site_pose * grasp_in_site_, closure);
+    }
+    ++steps_in_step_;
+    if (noise_ > 0) {
+      if (action.mode == ActionMode::kDiscrete && action.index < 12 && rng.Bernoulli(noise_)) {
+        action.index = static_cast<int>(rng.Index(12));
+      } else if (action.mode == ActionMode::kContinuous) {
+        const auto& limits = task_.spec().control.limits;
+        for (int k = 0; k < 6; ++k)
+          action.value[k] += rng.Normal() * noise_ * (k < 3 ? limits.translation : limits.rotation);
+      }
+    }
+    return action;
+  }
+  return HoldStill(env);
+}
+
+}  // namespace twinforge::sim
+
+#include <mutex>
+
+#include "core/thread_pool.h"
+
+namespace twinforge::sim {
+
+ExpertReport EvaluateExpert(std::shared_ptr<const Task> task, int episodes, int level,
+                            uint64_t seed, double noise, int threads) {
+  ExpertReport report;
+  report.episodes = episodes;
+  std::vector<int> steps_to_success(episodes, -1);
+  core::ThreadPool pool(threads);
+  std::vector<std::unique_ptr<Env>> envs(pool.size());
+  std::mutex mutex;
+  // Each pool block takes a contiguous range of episodes; each episode depends only on its seed.
+  const int blocks = pool.size();
+  pool.ParallelFor(blocks, [&](int64_t block) {
+    Env env(task, static_cast<int>(block));
+    ScriptedExpert expert(*task, noise);
+    for (int64_t i = episodes * block / blocks; i < episodes * (block + 1) / blocks; ++i) {
+      const uint64_t episode_seed = core::MixSeed(seed, static_cast<uint64_t>(i));
+      env.Reset(episode_seed, level);
+      expert.Reset();
+      core::Rng rng(episode_seed, 0xe4);
+      for (int t = 0; t < task->spec().horizon; ++t) {
+        const StepResult r = env.Step(expert.Act(env, rng));
+        if (r.success) {
+          steps_to_success[i] = t + 1;
+          break;
+        }
+        if (r.done) break;
+      }
+    }
+  });
+  double total = 0;
+  for (int i = 0; i < episodes; ++i) {
+    if (steps_to_success[i] > 0) {
+      ++report.successes;
+      total += steps_to_success[i];
+    } else {
+      report.failed_seeds.push_back(i);
+    }
+  }
+  report.mean_steps_to_success = report.successes ? total / report.successes : 0.0;
+  return report;
+}
+
+}  // namespace twinforge::sim

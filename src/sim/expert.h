@@ -1,0 +1,66 @@
+// The scripted expert of a task: follows the waypoint list in the task file using privileged
+// state, emitting the task's own action type (discrete moves or continuous deltas).
+#pragma once
+
+#include <memory>
+#include <vector>
+
+#include "core/rng.h"
+#include "sim/env.h"
+
+namespace twinforge::sim {
+
+class ScriptedExpert {
+ public:
+  // `noise`: probability of a random move (discrete) or relative std-dev of Gaussian noise on
+  // the motion (continuous). Gripper commands are never randomised.
+  explicit ScriptedExpert(const Task& task, double noise = 0.0);
+
+  // Starts the script from its first step.
+  void Reset();
+  // The next action for the env's current state.
+  Action Act(const Env& env, core::Rng& rng);
+  // Whether every step of the script has been done.
+  bool finished() const { return step_ >= static_cast<int>(task_.spec().expert.steps.size()); }
+  int current_step() const { return step_; }
+
+ private:
+  // Pose the tool should reach for the current step, in the robot base frame.
+  core::Pose Target(const Env& env, const ExpertStep& step);
+  // The action that brings the tool toward `target`; for discrete actions sets
+  // at_grid_target_ when no move helps.
+  Action Toward(const Env& env, const core::Pose& target, double closure);
+  Action HoldStill(const Env& env) const;
+  void Advance();
+
+  const Task& task_;
+  double noise_;
+  int step_ = 0;
+  int steps_in_step_ = 0;
+  core::Pose grasp_in_site_;  // drive steps: tool pose relative to the site at the step start
+  bool flip_fingers_ = false;
+  bool at_grid_target_ = false;
+  int last_move_ =
+      -1;  // discrete: the previous motion of this step  // discrete: no move brings the tool
+           // closer to the target  // move steps: which of the two finger directions to use
+};
+
+}  // namespace twinforge::sim
+
+namespace twinforge::sim {
+
+struct ExpertReport {
+  int episodes = 0;
+  int successes = 0;
+  double success_rate() const { return episodes ? double(successes) / episodes : 0.0; }
+  double mean_steps_to_success = 0;  // over successful episodes
+  std::vector<int> failed_seeds;     // episode seeds that failed, to replay them
+};
+
+// Runs the expert for `episodes` episodes at `level` (episode i uses seed MixSeed(seed, i)),
+// spread over `threads` threads with one env per thread. An episode succeeds when the success
+// predicates hold at any step; it ends there.
+ExpertReport EvaluateExpert(std::shared_ptr<const Task> task, int episodes, int level,
+                            uint64_t seed, double noise, int threads);
+
+}  // namespace twinforge::sim

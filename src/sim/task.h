@@ -1,0 +1,339 @@
+// Tasks are data: a YAML file names the scene, the robot, what success means, the horizon, how
+// each randomization level perturbs the scene, and a scripted expert as a list of waypoints.
+// No C++ branches on object names: everything below refers to MJCF names from the file.
+#pragma once
+
+#include <array>
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "sim/action.h"
+#include "sim/model.h"
+#include "sim/robot.h"
+
+namespace twinforge::sim {
+
+using Range = std::array<double, 2>;  // [min, max]
+
+enum class PredicateType { kSiteDistanceBelow, kJointAbove, kAxisUpright, kGripperReleased };
+
+// One success condition; the task succeeds while all hold.
+struct SuccessPredicate {
+  PredicateType type = PredicateType::kJointAbove;
+  std::string site_a, site_b;  // site_distance_below
+  std::string joint;           // joint_above
+  std::string body;            // axis_upright: the body whose local `axis` must point up
+  std::array<double, 3> axis{0, 0, 1};
+  double threshold = 0.0;  // distance (m), joint value, min |axis . z|, min finger opening
+  template <class A>
+  void Serialize(A& a) {
+    a.Enum("type", type,
+           {{"site_distance_below", PredicateType::kSiteDistanceBelow},
+            {"joint_above", PredicateType::kJointAbove},
+            {"axis_upright", PredicateType::kAxisUpright},
+            {"gripper_released", PredicateType::kGripperReleased}});
+    a("site_a", site_a);
+    a("site_b", site_b);
+    a("joint", joint);
+    a("body", body);
+    a("axis", axis);
+    a("threshold", threshold);
+    a.Require(type != PredicateType::kSiteDistanceBelow || (!site_a.empty() && !site_b.empty()),
+              "site_a", "two site names (site_a, site_b) for site_distance_below");
+    a.Require(type != PredicateType::kJointAbove || !joint.empty(), "joint",
+              "a joint name for joint_above");
+    a.Require(type != PredicateType::kAxisUpright || !body.empty(), "body",
+              "a body name for axis_upright");
+  }
+};
+
+// Level >= 1: bodies moved together by one offset and one yaw about the first body.
+struct PoseGroup {
+  std::vector<std::string> bodies;
+  Range x{0, 0}, y{0, 0}, z{0, 0}, yaw{0, 0};
+  template <class A>
+  void Serialize(A& a) {
+    a("bodies", bodies);
+    a("x", x);
+    a("y", y);
+    a("z", z);
+    a("yaw", yaw);
+    a.Require(!bodies.empty(), "bodies", "at least one body name");
+    a.Require(x[0] <= x[1] && y[0] <= y[1] && z[0] <= z[1] && yaw[0] <= yaw[1], "x",
+              "ranges written [min, max]");
+  }
+};
+
+// Level >= 2: static clutter boxes placed on the table around the task objects.
+struct DistractorSpec {
+  int max_count = 4;
+  std::array<int, 2> count{1, 4};
+  Range size{0.015, 0.045};  // half-extent of each box (m)
+  std::array<double, 3> region_min{0.2, -0.45, 0.0};
+  std::array<double, 3> region_max{0.75, 0.45, 0.0};
+  double clearance = 0.08;  // min distance (xy) to any object body
+  template <class A>
+  void Serialize(A& a) {
+    a("max_count", max_count);
+    a("count", count);
+    a("size", size);
+    a("region_min", region_min);
+    a("region_max", region_max);
+    a("clearance", clearance);
+    a.Require(count[0] >= 0 && count[0] <= count[1] && count[1] <= max_count, "count",
+              "[min, max] with 0 <= min <= max <= max_count");
+  }
+};
+
+// Level >= 3: a push during the episode, on a free body (a force in a random horizontal
+// direction) or on a joint (a generalised force, e.g. a drawer pushed back).
+struct DisturbanceSpec {
+  std::string body;
+  std::string joint;
+  Range force{5, 10};      // N (body) or N / Nm (joint; the sign is kept)
+  double duration = 0.3;   // s
+  Range window{0.2, 0.6};  // when it starts, as a fraction of the horizon
+  double probability = 1.0;
+  template <class A>
+  void Serialize(A& a) {
+    a("body", body);
+    a("joint", joint);
+    a("force", force);
+    a("duration", duration);
+    a("window", window);
+    a("probability", probability);
+    a.Require(body.empty() != joint.empty(), "body", "exactly one of body or joint");
+  }
+};
+
+// Optional physics randomization, as scale factors on the nominal model.
+struct PhysicsRandomization {
+  int from_level = 4;  // applied at this level and above (4 = never)
+  Range friction{1, 1}, mass{1, 1}, damping{1, 1}, actuator_gain{1, 1};
+  template <class A>
+  void Serialize(A& a) {
+    a("from_level", from_level);
+    a("friction", friction);
+    a("mass", mass);
+    a("damping", damping);
+    a("actuator_gain", actuator_gain);
+  }
+};
+
+struct RandomizationSpec {
+  std::vector<PoseGroup> groups;
+  double robot_joint_noise = 0.0;  // rad added to each home joint, level >= 1
+  DistractorSpec distractors;
+  std::vector<DisturbanceSpec> disturbances;
+  PhysicsRandomization physics;
+  template <class A>
+  void Serialize(A& a) {
+    a("groups", groups);
+    a("robot_joint_noise", robot_joint_noise);
+    a("distractors", distractors);
+    a("disturbances", disturbances);
+    a("physics", physics);
+  }
+};
+
+enum class ExpertStepType { kMove, kGrip, kDrive };
+enum class GripCommand { kKeep, kOpen, kClose };
+
+// One waypoint of the scripted expert. Poses are given in the yaw frame of `site` (z up, x along
+// the site's x projected on the table): the tool centre goes to `offset`, the gripper's approach
+// axis (tool z) along `approach` and its finger-opening axis (tool y) along +-`fingers`.
+struct ExpertStep {
+  ExpertStepType type = ExpertStepType::kMove;
+  std::string site;                          // anchor ("" = world)
+  std::array<double, 3> offset{0, 0, 0};     // m, in the anchor's yaw frame
+  std::array<double, 3> approach{0, 0, -1};  // tool z in the anchor frame (default: down)
+  std::array<double, 3> fingers{0, 1, 0};    // tool y in the anchor frame (sign is free)
+  bool world_orientation = false;            // orientation in the base frame, not the anchor's
+  GripCommand gripper = GripCommand::kKeep;
+  std::string joint;                 // drive: the joint to move
+  double to = 0.0;                   // drive: target joint value
+  double lead = 0.03;                // drive: how far ahead of the grasp to aim
+  int hold = 4;                      // grip: control steps to wait
+  double tolerance = 0.012;          // m, move: position tolerance
+  double rotation_tolerance = 0.12;  // rad
+  int max_steps = 60;                // give up on the step after this many control steps
+  template <class A>
+  void Serialize(A& a) {
+    a.Enum("type", type,
+           {{"move", ExpertStepType::kMove},
+            {"grip", ExpertStepType::kGrip},
+            {"drive", ExpertStepType::kDrive}});
+    a("site", site);
+    a("offset", offset);
+    a("approach", approach);
+    a("fingers", fingers);
+    a("world_orientation", world_orientation);
+    a.Enum("gripper", gripper,
+           {{"keep", GripCommand::kKeep},
+            {"open", GripCommand::kOpen},
+            {"close", GripCommand::kClose}});
+    a("joint", joint);
+    a("to", to);
+    a("lead", lead);
+    a("hold", hold);
+    a("tolerance", tolerance);
+    a("rotation_tolerance", rotation_tolerance);
+    a("max_steps", max_steps);
+    a.Require(type != ExpertStepType::kDrive || !joint.empty(), "joint",
+              "a joint name for a drive step");
+    a.Require(type != ExpertStepType::kGrip || gripper != GripCommand::kKeep, "gripper",
+              "open or close for a grip step");
+    a.Require(max_steps > 0, "max_steps", "a positive number of control steps");
+    const Eigen::Vector3d z(approach.data()), y(fingers.data());
+    a.Require(
+        z.norm() > 1e-6 && y.norm() > 1e-6 && z.normalized().cross(y.normalized()).norm() > 0.5,
+        "fingers", "a direction well away from approach (at least 30 deg)");
+  }
+};
+
+struct ExpertSpec {
+  std::vector<ExpertStep> steps;
+  template <class A>
+  void Serialize(A& a) {
+    a("steps", steps);
+  }
+};
+
+struct CameraSpec {
+  std::string name = "front";
+  std::array<double, 3> position{1.1, 0.0, 0.75};  // robot base frame
+  std::array<double, 3> look_at{0.5, 0.0, 0.1};
+  double fovy_deg = 58.0;
+  int width = 80, height = 60;
+  template <class A>
+  void Serialize(A& a) {
+    a("name", name);
+    a("position", position);
+    a("look_at", look_at);
+    a("fovy_deg", fovy_deg);
+    a("width", width);
+    a("height", height);
+    a.Require(width > 0 && height > 0, "width", "a positive image size");
+    a.Require(fovy_deg > 1 && fovy_deg < 170, "fovy_deg", "a field of view in (1, 170) deg");
+  }
+};
+
+struct WorkspaceSpec {
+  std::array<double, 3> min{-0.3, -0.6, 0.02};
+  std::array<double, 3> max{0.9, 0.6, 1.0};
+  template <class A>
+  void Serialize(A& a) {
+    a("min", min);
+    a("max", max);
+  }
+};
+
+struct ControlSpec {
+  ActionMode action = ActionMode::kDiscrete;
+  ActionLimits limits;
+  int substeps = 20;        // physics steps per control step
+  double timestep = 0.005;  // s per physics step (10 Hz control by default)
+  template <class A>
+  void Serialize(A& a) {
+    a.Enum("action", action,
+           {{"discrete", ActionMode::kDiscrete}, {"continuous", ActionMode::kContinuous}});
+    a("limits", limits);
+    a("substeps", substeps);
+    a("timestep", timestep);
+    a.Require(substeps > 0, "substeps", "a positive integer");
+    a.Require(timestep > 0 && timestep <= 0.02, "timestep", "a step in (0, 0.02] s");
+  }
+};
+
+struct TaskSpec {
+  std::string name;
+  std::string scene;  // MJCF, relative to the task file
+  std::string robot;  // robot YAML, relative to the task file ("" = default)
+  std::array<double, 3> robot_position{0, 0, 0};
+  double robot_yaw = 0.0;
+  ControlSpec control;
+  int horizon = 100;                 // control steps
+  std::vector<std::string> objects;  // bodies whose pose enters the privileged state
+  std::vector<std::string> joints;   // joints whose value enters the privileged state
+  std::vector<SuccessPredicate> success;
+  RandomizationSpec randomization;
+  ExpertSpec expert;
+  CameraSpec camera;
+  WorkspaceSpec workspace;
+
+  std::filesystem::path file;  // where it was loaded from (not serialized)
+
+  template <class A>
+  void Serialize(A& a) {
+    a("name", name);
+    a("scene", scene);
+    a("robot", robot);
+    a("robot_position", robot_position);
+    a("robot_yaw", robot_yaw);
+    a("control", control);
+    a("horizon", horizon);
+    a("objects", objects);
+    a("joints", joints);
+    a("success", success);
+    a("randomization", randomization);
+    a("expert", expert);
+    a("camera", camera);
+    a("workspace", workspace);
+    a.Require(!name.empty(), "name", "a task name");
+    a.Require(!scene.empty(), "scene", "the path of the scene MJCF");
+    a.Require(horizon > 0, "horizon", "a positive number of control steps");
+    a.Require(!success.empty(), "success", "at least one success predicate");
+  }
+};
+
+// Loads a task file; a bare name ("open_drawer") means assets/tasks/<name>/task.yaml.
+// Throws ConfigError naming the file, line and field.
+TaskSpec LoadTaskSpec(const std::string& name_or_path);
+
+// Names of the tasks shipped in assets/tasks.
+std::vector<std::string> BuiltinTasks();
+
+// Indices into the assembled model that the env, success checks and experts use.
+struct TaskIndex {
+  RobotIndex robot;
+  std::vector<int> object_bodies;
+  std::vector<int> state_joints;  // joint ids
+  struct Predicate {
+    PredicateType type;
+    int a = -1, b = -1;  // sites, joint or body ids
+    Eigen::Vector3d axis;
+    double threshold;
+  };
+  std::vector<Predicate> predicates;
+  std::vector<int> distractor_bodies;  // mocap bodies
+  std::vector<int> distractor_geoms;
+  int table_geom = -1;
+};
+
+// A task ready to simulate: its spec, robot, assembled nominal model and resolved names.
+// Immutable once built; environments copy the model and share the rest.
+class Task {
+ public:
+  explicit Task(TaskSpec spec);
+
+  const TaskSpec& spec() const { return spec_; }
+  const RobotSpec& robot() const { return robot_; }
+  const mjModel* model() const { return model_.get(); }
+  const TaskIndex& index() const { return index_; }
+  const std::string& mjcf() const { return mjcf_; }
+
+  // Resolves a name of `type` in the model or throws ConfigError naming the task file and field.
+  int Id(mjtObj type, const std::string& name, const std::string& field) const;
+
+ private:
+  TaskSpec spec_;
+  RobotSpec robot_;
+  std::string mjcf_;
+  ModelPtr model_;
+  TaskIndex index_;
+};
+
+}  // namespace twinforge::sim
