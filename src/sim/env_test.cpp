@@ -15,7 +15,7 @@ std::shared_ptr<const Task> DrawerTask() {
 TEST(Env, ArmTracksADiscreteMoveWithinOneControlPeriod) {
   Env env(DrawerTask());
   env.Reset(1, 0);
-  for (int action : {4, 0, 2, 5, 1, 3, 4, 4, 4, 8, 8, 8, 8, 8, 8, 6, 6, 7, 7, 10, 10, 11, 11}) {
+  for (int action : {4, 0, 2, 5, 1, 3, 4, 4, 8, 8, 9, 9, 6, 6, 7, 7, 10, 10, 11, 11}) {
     const core::Pose start = env.EePose();
     const core::Pose target = start * DecodeAction(Action::Discrete(action), {}, {}).delta;
     env.Step(Action::Discrete(action));
