@@ -55,14 +55,16 @@ void AddSimCommands(CLI::App& parent, int& exit_code) {
   trace->add_option("--task", trace_options->task, "built-in task name or task.yaml path");
   trace->add_option("--level", trace_options->level, "randomization level 0..3")
       ->check(CLI::Range(0, 3));
-  trace->add_option("--seed", trace_options->seed, "episode seed");
+  trace->add_option("--seed", trace_options->seed, "seed, as given to sim expert");
+  auto episode = std::make_shared<int>(0);
+  trace->add_option("--episode", *episode, "episode index (sim expert lists failed ones)");
   trace->add_option("--noise", trace_options->noise, "expert action noise");
-  trace->callback([trace_options, &exit_code] {
+  trace->callback([trace_options, episode, &exit_code] {
     const auto& o = *trace_options;
     auto task = std::make_shared<const sim::Task>(sim::LoadTaskSpec(o.task));
     sim::Env env(task);
     sim::ScriptedExpert expert(*task, o.noise);
-    const uint64_t seed = core::MixSeed(o.seed, 0);
+    const uint64_t seed = core::MixSeed(o.seed, static_cast<uint64_t>(*episode));
     env.Reset(seed, o.level);
     core::Rng rng(seed, 0xe4);
     std::vector<float> state(env.state_dim());

@@ -155,9 +155,12 @@ Action ScriptedExpert::Act(const Env& env, core::Rng& rng) {
       const int site = task_.Id(mjOBJ_SITE, step.site, "site");
       const double value = d->qpos[m->jnt_qposadr[joint]];
       const core::Pose site_pose = env.SitePose(site);
-      if (steps_in_step_ == 0) grasp_in_site_ = site_pose.Inverse() * env.EePose();
+      if (steps_in_step_ == 0) {
+        grasp_in_site_ = site_pose.Inverse() * env.EePose();
+        drive_sign_ = step.to >= value ? 1.0 : -1.0;
+      }
       const double remaining = step.to - value;
-      if (std::abs(remaining) < 0.005) {
+      if (remaining * drive_sign_ < 0.005) {  // reached or passed the target
         Advance();
         continue;
       }

@@ -39,6 +39,7 @@ class ScriptedExpert {
   int steps_in_step_ = 0;
   core::Pose grasp_in_site_;  // drive steps: tool pose relative to the site at the step start
   bool flip_fingers_ = false;
+  double drive_sign_ = 1.0;  // drive steps: direction of travel of the joint
   bool at_grid_target_ = false;
   int last_move_ =
       -1;  // discrete: the previous motion of this step  // discrete: no move brings the tool
