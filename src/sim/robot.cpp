@@ -58,7 +58,9 @@ Kinematics::Kinematics(const RobotSpec& spec)
     : spec_(spec),
       model_(LoadModel(spec.mjcf_path())),
       data_(MakeData(model_.get())),
-      index_(RobotIndex::Resolve(model_.get(), spec)) {}
+      index_(RobotIndex::Resolve(model_.get(), spec)),
+      jacp_(3 * model_->nv),
+      jacr_(3 * model_->nv) {}
 
 void Kinematics::SetArm(const ArmVector& q) const {
   for (int k = 0; k < kArmDof; ++k) data_->qpos[index_.arm_qpos[k]] = q[k];
@@ -80,13 +82,12 @@ core::Pose Kinematics::EePose(const ArmVector& q) const {
 Eigen::Matrix<double, 6, kArmDof> Kinematics::Jacobian(const ArmVector& q) const {
   SetArm(q);
   const int nv = model_->nv;
-  std::vector<double> jacp(3 * nv), jacr(3 * nv);
-  mj_jacSite(model_.get(), data_.get(), jacp.data(), jacr.data(), index_.ee_site);
+  mj_jacSite(model_.get(), data_.get(), jacp_.data(), jacr_.data(), index_.ee_site);
   Eigen::Matrix<double, 6, kArmDof> j;
   for (int r = 0; r < 3; ++r)
     for (int k = 0; k < kArmDof; ++k) {
-      j(r, k) = jacp[r * nv + index_.arm_dof[k]];
-      j(3 + r, k) = jacr[r * nv + index_.arm_dof[k]];
+      j(r, k) = jacp_[r * nv + index_.arm_dof[k]];
+      j(3 + r, k) = jacr_[r * nv + index_.arm_dof[k]];
     }
   return j;
 }

@@ -93,6 +93,7 @@ class Kinematics {
   ModelPtr model_;
   DataPtr data_;  // scratch; Kinematics is not shared between threads
   RobotIndex index_;
+  mutable std::vector<double> jacp_, jacr_;  // scratch Jacobians (3 x nv)
 };
 
 }  // namespace twinforge::sim

@@ -1,0 +1,128 @@
+// Cameras and point clouds in the robot base frame.
+//
+// Two ways to get a scene cloud: (a) synthetic, points sampled on the geometry at its current
+// pose (cheap, no occlusion); (b) rendered, a depth image ray-cast from a pinhole camera, with
+// optional depth noise, back-projected and cropped to the workspace. The arm's own points always
+// come from forward kinematics (its geoms sampled at their current poses), never from depth.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "core/rng.h"
+#include "core/se3.h"
+#include "sim/model.h"
+#include "sim/task.h"
+
+namespace twinforge::sim {
+
+struct CameraIntrinsics {
+  int width = 80, height = 60;
+  double fx = 0, fy = 0, cx = 0, cy = 0;
+};
+
+// A pinhole camera; `pose` maps camera coordinates (OpenCV: x right, y down, z forward) to the
+// robot base frame.
+struct Camera {
+  CameraIntrinsics intrinsics;
+  core::Pose pose;
+};
+
+// The task's camera: intrinsics from its field of view, pose looking from `position` at `look_at`.
+Camera MakeCamera(const CameraSpec& spec);
+
+struct Workspace {
+  Eigen::Vector3f min, max;
+  bool Contains(const float* p) const {
+    return p[0] >= min[0] && p[0] <= max[0] && p[1] >= min[1] && p[1] <= max[1] && p[2] >= min[2] &&
+           p[2] <= max[2];
+  }
+};
+Workspace MakeWorkspace(const WorkspaceSpec& spec);
+
+// Depth noise of a structured-light sensor: sigma = sigma0 + sigma_z2 * z^2 (metres).
+struct DepthNoise {
+  double sigma0 = 0.0;
+  double sigma_z2 = 0.0;
+};
+
+// Geom groups seen by cameras and samplers. The robot's geoms are in group 1.
+constexpr int kRobotGeomGroup = 1;
+
+// Ray-casts depth (metres along the optical axis, 0 = no return) and RGB images.
+class RayCaster {
+ public:
+  explicit RayCaster(const Camera& camera);
+  // Renders into depth[width*height] and, if not null, rgb[width*height*3]. `base` is the robot
+  // base pose in the world. Robot geoms are skipped unless `include_robot`. Allocation-free.
+  void Render(const mjModel* m, const mjData* d, const core::Pose& base, float* depth, uint8_t* rgb,
+              bool include_robot = false) const;
+  const Camera& camera() const { return camera_; }
+
+ private:
+  Camera camera_;
+  std::vector<double> directions_;  // unit ray per pixel, camera frame (3 per pixel)
+  std::vector<double> z_scale_;     // optical-axis component of each ray
+};
+
+// Adds noise to a depth image in place (pixels with no return stay 0).
+void AddDepthNoise(float* depth, int count, const DepthNoise& noise, core::Rng& rng);
+
+// Back-projects a depth image into base-frame points inside `workspace`; writes up to
+// width*height points to xyz and returns how many.
+int DepthToPoints(const Camera& camera, const float* depth, const Workspace& workspace, float* xyz);
+
+// Points on the surfaces of a set of geoms, precomputed once in each geom's frame and moved to
+// the geoms' current poses on demand.
+class SurfaceSampler {
+ public:
+  // Samples the geoms whose group is in `groups` (bit i = group i), area-weighted at `density`
+  // points per square metre, between `min_per_geom` and `max_per_geom` points each.
+  SurfaceSampler(const mjModel* m, unsigned groups, double density = 20000, int min_per_geom = 16,
+                 int max_per_geom = 4000);
+
+  // Writes the base-frame points inside `workspace` to xyz (capacity: capacity() points) and
+  // returns how many. Primitive sizes are read from the model, so resized geoms stay right.
+  int Transform(const mjModel* m, const mjData* d, const core::Pose& base,
+                const Workspace& workspace, float* xyz) const;
+  int capacity() const { return static_cast<int>(geom_.size()); }
+
+ private:
+  std::vector<int> geom_;        // geom id of each sample
+  std::vector<float> local_;     // sample in the geom frame, as a fraction of its size for
+                                 // primitives, or in metres for meshes (3 per sample)
+  std::vector<uint8_t> scaled_;  // whether local_ is relative to geom_size
+};
+
+// Draws exactly `count` points from `points` (n of them) into out, without replacement when
+// n >= count, otherwise all of them plus repeats; zero-fills when n == 0.
+void ResamplePoints(const float* points, int n, int count, core::Rng& rng, float* out);
+
+// Everything needed to turn an env's state into the clouds a policy sees, with buffers
+// allocated once. Not thread-safe: one per worker.
+class CloudMaker {
+ public:
+  struct Options {
+    int scene_points = 6000;
+    int arm_points = 3000;
+    bool rendered = true;  // ray-cast depth (else synthetic samples)
+    DepthNoise noise;
+  };
+  CloudMaker(const Task& task, const mjModel* m, const Options& options);
+
+  // Fills scene[scene_points*3] and arm[arm_points*3] (base frame, workspace-cropped).
+  void Make(const mjModel* m, const mjData* d, const core::Pose& base, core::Rng& rng, float* scene,
+            float* arm);
+  const Options& options() const { return options_; }
+  const RayCaster& caster() const { return caster_; }
+
+ private:
+  Options options_;
+  Workspace workspace_;
+  RayCaster caster_;
+  SurfaceSampler scene_sampler_, arm_sampler_;
+  std::vector<float> depth_, scratch_;
+};
+
+}  // namespace twinforge::sim

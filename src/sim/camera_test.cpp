@@ -1,0 +1,109 @@
+#include "sim/camera.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+
+#include "core/fs.h"
+#include "sim/env.h"
+
+namespace twinforge::sim {
+namespace {
+
+// A task whose scene is one box (half-size 5 cm at x = 0.55 m, z = 0.1 m) and no table.
+std::shared_ptr<const Task> BoxTask() {
+  const auto dir = std::filesystem::temp_directory_path() / "twinforge_camera_test";
+  core::WriteFileAtomic(dir / "scene.xml", R"(<mujoco>
+  <worldbody>
+    <body name="block" pos="0.55 0 0.1">
+      <geom name="block" type="box" size="0.05 0.05 0.05" rgba="1 0 0 1" group="2"/>
+      <site name="a" pos="0 0 0"/><site name="b" pos="0 0 0.01"/>
+    </body>
+  </worldbody>
+</mujoco>)");
+  core::WriteFileAtomic(dir / "task.yaml", R"(name: box
+scene: scene.xml
+success: [{type: site_distance_below, site_a: a, site_b: b, threshold: 0.1}]
+randomization: {distractors: {max_count: 0, count: [0, 0]}}
+camera: {position: [1.2, 0.3, 0.6], look_at: [0.55, 0.0, 0.1], fovy_deg: 45, width: 80, height: 60}
+workspace: {min: [0.3, -0.3, 0.02], max: [0.8, 0.3, 0.5]}
+)");
+  return std::make_shared<const Task>(LoadTaskSpec((dir / "task.yaml").string()));
+}
+
+// Distance from p to the box surface.
+double BoxSurfaceDistance(const float* p) {
+  const Eigen::Vector3d q =
+      (Eigen::Vector3d(p[0], p[1], p[2]) - Eigen::Vector3d(0.55, 0, 0.1)).cwiseAbs() -
+      Eigen::Vector3d::Constant(0.05);
+  const double outside = q.cwiseMax(0.0).norm();
+  const double inside = std::min(q.maxCoeff(), 0.0);
+  return std::abs(outside + inside);
+}
+
+TEST(Camera, RenderedAndSyntheticPointsLieOnTheGeometry) {
+  auto task = BoxTask();
+  Env env(task);
+  env.Reset(0, 0);
+  for (bool rendered : {true, false}) {
+    CloudMaker maker(*task, env.model(),
+                     {.scene_points = 512, .arm_points = 256, .rendered = rendered});
+    std::vector<float> scene(512 * 3), arm(256 * 3);
+    core::Rng rng(1);
+    maker.Make(env.model(), env.data(), env.base(), rng, scene.data(), arm.data());
+    double worst = 0;
+    for (int i = 0; i < 512; ++i) worst = std::max(worst, BoxSurfaceDistance(&scene[3 * i]));
+    EXPECT_LT(worst, 2e-3) << (rendered ? "rendered" : "synthetic");
+  }
+}
+
+TEST(Camera, ArmPointsComeFromForwardKinematicsNotDepth) {
+  auto task = BoxTask();
+  Env env(task);
+  env.Reset(0, 0);
+  CloudMaker maker(*task, env.model(), {.scene_points = 256, .arm_points = 256});
+  std::vector<float> scene(256 * 3), arm(256 * 3);
+  core::Rng rng(2);
+  maker.Make(env.model(), env.data(), env.base(), rng, scene.data(), arm.data());
+  // The gripper hangs above the box inside the workspace: arm points are near the tool.
+  const Eigen::Vector3d tool = env.EePose().translation;
+  int near_tool = 0;
+  for (int i = 0; i < 256; ++i)
+    near_tool += (Eigen::Vector3d(arm[3 * i], arm[3 * i + 1], arm[3 * i + 2]) - tool).norm() < 0.15;
+  EXPECT_GT(near_tool, 50);
+  // And no scene point is on the arm: every one is on the box.
+  for (int i = 0; i < 256; ++i) ASSERT_LT(BoxSurfaceDistance(&scene[3 * i]), 2e-3);
+}
+
+TEST(Camera, DepthNoiseGrowsWithDistance) {
+  std::vector<float> near(20000, 0.5f), far(20000, 1.5f);
+  core::Rng rng(3);
+  const DepthNoise noise{0.0, 0.004};
+  AddDepthNoise(near.data(), 20000, noise, rng);
+  AddDepthNoise(far.data(), 20000, noise, rng);
+  auto stddev = [](const std::vector<float>& v, float mean) {
+    double s = 0;
+    for (float x : v) s += (x - mean) * (x - mean);
+    return std::sqrt(s / v.size());
+  };
+  EXPECT_NEAR(stddev(near, 0.5f), 0.004 * 0.25, 1e-4);
+  EXPECT_NEAR(stddev(far, 1.5f), 0.004 * 2.25, 5e-4);
+}
+
+TEST(Camera, RgbShowsTheObjectColour) {
+  auto task = BoxTask();
+  Env env(task);
+  env.Reset(0, 0);
+  RayCaster caster(MakeCamera(task->spec().camera));
+  std::vector<float> depth(80 * 60);
+  std::vector<uint8_t> rgb(80 * 60 * 3);
+  caster.Render(env.model(), env.data(), env.base(), depth.data(), rgb.data());
+  // The camera looks at the box: the centre pixel is red.
+  const int centre = 30 * 80 + 40;
+  EXPECT_GT(depth[centre], 0.0f);
+  EXPECT_GT(rgb[3 * centre], 100);
+  EXPECT_LT(rgb[3 * centre + 1], 20);
+}
+
+}  // namespace
+}  // namespace twinforge::sim

@@ -1,0 +1,82 @@
+#include "sim/task.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "core/error.h"
+#include "core/fs.h"
+
+namespace twinforge::sim {
+namespace {
+
+// Writes a copy of the drawer task with `replace` swapped for `with` and returns the error.
+std::string ErrorOfEditedDrawerTask(const std::string& replace, const std::string& with) {
+  const auto source = std::filesystem::path(TWINFORGE_ASSETS_DIR) / "tasks/open_drawer";
+  const auto dir = std::filesystem::temp_directory_path() / "twinforge_task_test";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  std::filesystem::copy_file(source / "scene.xml", dir / "scene.xml");
+  std::string text = core::ReadTextFile(source / "task.yaml");
+  const auto at = text.find(replace);
+  EXPECT_NE(at, std::string::npos) << replace;
+  text.replace(at, replace.size(), with);
+  core::WriteFileAtomic(dir / "task.yaml", text);
+  try {
+    Task task(LoadTaskSpec((dir / "task.yaml").string()));
+  } catch (const core::Error& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(Task, BuiltinTasksLoad) {
+  const auto names = BuiltinTasks();
+  for (const char* expected : {"open_drawer", "open_cabinet", "mug_on_shelf"})
+    EXPECT_NE(std::find(names.begin(), names.end(), expected), names.end()) << expected;
+  for (const auto& name : names) EXPECT_NO_THROW(Task(LoadTaskSpec(name))) << name;
+}
+
+TEST(Task, UnknownJointInAPredicateNamesTheField) {
+  const std::string e = ErrorOfEditedDrawerTask("joint: drawer_slide, threshold: 0.12",
+                                                "joint: drawer_slid, threshold: 0.12");
+  EXPECT_NE(e.find("task.yaml"), std::string::npos) << e;
+  EXPECT_NE(e.find("'success[0].joint'"), std::string::npos) << e;
+  EXPECT_NE(e.find("no joint named 'drawer_slid'"), std::string::npos) << e;
+}
+
+TEST(Task, BadPredicateTypeListsTheChoices) {
+  const std::string e = ErrorOfEditedDrawerTask("type: joint_above", "type: joint_over");
+  EXPECT_NE(e.find("'success[0].type'"), std::string::npos) << e;
+  EXPECT_NE(e.find("\"joint_above\""), std::string::npos) << e;
+}
+
+TEST(Task, MisspelledKeyAndBadRangeAreCaught) {
+  EXPECT_NE(ErrorOfEditedDrawerTask("horizon: 80", "horizn: 80").find("did you mean 'horizon'"),
+            std::string::npos);
+  EXPECT_NE(ErrorOfEditedDrawerTask("x: [-0.06, 0.06]", "x: [0.06, -0.06]")
+                .find("ranges written [min, max]"),
+            std::string::npos);
+  EXPECT_NE(ErrorOfEditedDrawerTask("bodies: [chest]", "bodies: [drawer]")
+                .find("must have a free joint or be a child of the world body"),
+            std::string::npos);
+}
+
+TEST(Task, MissingSceneFileIsNamed) {
+  const std::string e = ErrorOfEditedDrawerTask("scene: scene.xml", "scene: nowhere.xml");
+  EXPECT_NE(e.find("'scene'"), std::string::npos) << e;
+  EXPECT_NE(e.find("nowhere.xml"), std::string::npos) << e;
+}
+
+TEST(Task, UnknownTaskNameListsBuiltins) {
+  try {
+    LoadTaskSpec("open_fridge");
+    FAIL();
+  } catch (const core::IoError& e) {
+    EXPECT_NE(std::string(e.what()).find("open_drawer"), std::string::npos);
+  }
+}
+
+}  // namespace
+}  // namespace twinforge::sim
