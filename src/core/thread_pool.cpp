@@ -22,12 +22,11 @@ ThreadPool::~ThreadPool() {
   for (auto& worker : workers_) worker.join();
 }
 
-void ThreadPool::RunBlock(int block) {
-  const int64_t blocks = size();
-  const int64_t begin = job_size_ * block / blocks;
-  const int64_t end = job_size_ * (block + 1) / blocks;
+void ThreadPool::RunBlock(int) {
+  // Items are handed out one at a time: uneven items (an env in contact costs more than one in
+  // free space) do not leave a thread idle.
   try {
-    for (int64_t i = begin; i < end; ++i) (*job_)(i);
+    for (int64_t i = next_.fetch_add(1); i < job_size_; i = next_.fetch_add(1)) (*job_)(i);
   } catch (...) {
     std::lock_guard lock(mutex_);
     if (!error_) error_ = std::current_exception();
@@ -61,6 +60,7 @@ void ThreadPool::ParallelFor(int64_t n, const std::function<void(int64_t)>& fn) 
     std::lock_guard lock(mutex_);
     job_ = &fn;
     job_size_ = n;
+    next_.store(0);
     error_ = nullptr;
     pending_ = static_cast<int>(workers_.size());
     ++generation_;

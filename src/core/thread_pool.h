@@ -1,6 +1,7 @@
 // A fixed-size pool of worker threads for data-parallel loops.
 #pragma once
 
+#include <atomic>
 #include <condition_variable>
 #include <cstdint>
 #include <exception>
@@ -22,9 +23,9 @@ class ThreadPool {
   int size() const { return static_cast<int>(workers_.size()) + 1; }
 
   // Calls fn(i) exactly once for each i in [0, n), spread over the pool, and returns when all
-  // are done. Items are split into contiguous blocks, one per thread, so a call allocates
-  // nothing. The first exception thrown by fn is rethrown here after the others finish.
-  // One caller at a time: a pool serves one loop, not several concurrent ones.
+  // are done. Threads take the next item from a shared counter; a call allocates nothing. The first
+  // exception thrown by fn is rethrown here after the others finish. One caller at a time: a pool
+  // serves one loop, not several concurrent ones.
   void ParallelFor(int64_t n, const std::function<void(int64_t)>& fn);
 
  private:
@@ -37,6 +38,7 @@ class ThreadPool {
   std::condition_variable finished_;
   const std::function<void(int64_t)>* job_ = nullptr;
   int64_t job_size_ = 0;
+  std::atomic<int64_t> next_{0};
   uint64_t generation_ = 0;
   int pending_ = 0;
   bool stopping_ = false;

@@ -1,0 +1,123 @@
+#include "sim/bench.h"
+
+#include <algorithm>
+#include <chrono>
+#include <functional>
+
+#include "sim/camera.h"
+#include "sim/vec_env.h"
+
+namespace twinforge::sim {
+
+namespace {
+
+double Median(std::vector<double> values) {
+  std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
+  return values[values.size() / 2];
+}
+
+// work()/seconds for one run, where work() returns the units it did.
+double Rate(const std::function<double()>& work) {
+  const auto start = std::chrono::steady_clock::now();
+  const double units = work();
+  return units / std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+}  // namespace
+
+nlohmann::json RunSimBench(std::shared_ptr<const Task> task, const BenchOptions& options) {
+  const int substeps = task->spec().control.substeps;
+
+  // Baseline: raw mj_step on a copy of the task model, driven like the env drives it (joint
+  // targets moved every control period, arm gravity compensated) but without IK, task logic or
+  // batching.
+  Env reference(task);
+  reference.Reset(0, 1);
+  ModelPtr model(mj_copyModel(nullptr, reference.model()));
+  DataPtr data = MakeData(model.get());
+  const auto& robot = task->index().robot;
+  core::Rng raw_rng(7);
+  auto raw_run = [&] {
+    mj_resetData(model.get(), data.get());
+    mju_copy(data->qpos, reference.data()->qpos, model->nq);
+    mju_copy(data->ctrl, reference.data()->ctrl, model->nu);
+    for (int i = 0; i < options.raw_steps; ++i) {
+      if (i % substeps == 0)
+        for (int k = 0; k < kArmDof; ++k)
+          data->ctrl[robot.arm_actuator[k]] =
+              reference.data()->ctrl[robot.arm_actuator[k]] + raw_rng.Uniform(-0.05, 0.05);
+      for (int k = 0; k < kArmDof; ++k)
+        data->qfrc_applied[robot.arm_dof[k]] = data->qfrc_bias[robot.arm_dof[k]];
+      mj_step(model.get(), data.get());
+    }
+    return double(options.raw_steps);
+  };
+
+  // VecEnv physics steps with random discrete actions.
+  VecEnv vec1(task, {.num_envs = options.num_envs, .threads = 1, .seed = 1, .level = 1});
+  VecEnv vec2(task, {.num_envs = options.num_envs, .threads = 2, .seed = 1, .level = 1});
+  std::vector<Action> actions(options.num_envs);
+  core::Rng action_rng(9);
+  auto vec_run = [&](VecEnv& vec) {
+    vec.Reset();
+    for (int t = 0; t < options.control_steps; ++t) {
+      for (auto& a : actions) a = Action::Discrete(static_cast<int>(action_rng.Index(12)));
+      vec.Step(actions.data());
+    }
+    return double(options.control_steps) * vec.num_envs() * substeps;
+  };
+
+  // Baseline: raw mj_ray, one ray per pixel of the task camera's image, scene geoms only.
+  CloudMaker maker(*task, reference.model(), {});
+  const auto& k = maker.caster().camera().intrinsics;
+  const int pixels = k.width * k.height;
+  auto ray_run = [&] {
+    mjtByte groups[mjNGROUP] = {1, 0, 1, 1, 1, 1};
+    const mjtNum origin[3] = {1.1, 0.0, 0.7};
+    int geom = -1;
+    for (int c = 0; c < options.clouds; ++c)
+      for (int i = 0; i < pixels; ++i) {
+        const mjtNum dir[3] = {-1.0, (i % k.width - k.width / 2) * 0.01,
+                               -0.7 + (i / k.width) * 0.01};
+        mj_ray(reference.model(), reference.data(), origin, dir, groups, 1, -1, &geom);
+      }
+    return double(options.clouds) * pixels;
+  };
+  std::vector<float> scene(maker.options().scene_points * 3), arm(maker.options().arm_points * 3);
+  core::Rng cloud_rng(4);
+  auto cloud_run = [&] {
+    for (int c = 0; c < options.clouds; ++c)
+      maker.Make(reference.model(), reference.data(), reference.base(), cloud_rng, scene.data(),
+                 arm.data());
+    return double(options.clouds);
+  };
+
+  // Each repeat measures everything back to back, so ratios compare runs seconds apart on a
+  // shared, noisy machine; medians over repeats.
+  std::vector<double> raw, v1, v2, rays, clouds, overhead, scaling, cloud_ratio;
+  for (int r = 0; r < options.repeats; ++r) {
+    raw.push_back(Rate(raw_run));
+    v1.push_back(Rate([&] { return vec_run(vec1); }));
+    v2.push_back(Rate([&] { return vec_run(vec2); }));
+    rays.push_back(Rate(ray_run));
+    clouds.push_back(Rate(cloud_run));
+    overhead.push_back(raw.back() / v1.back() - 1.0);
+    scaling.push_back(v2.back() / v1.back());
+    cloud_ratio.push_back((rays.back() / pixels) / clouds.back());
+  }
+
+  return {{"task", task->spec().name},
+          {"repeats", options.repeats},
+          {"num_envs", options.num_envs},
+          {"raw_mj_step_per_s", Median(raw)},
+          {"vecenv_physics_steps_per_s_1_thread", Median(v1)},
+          {"vecenv_physics_steps_per_s_2_threads", Median(v2)},
+          {"vecenv_overhead_vs_raw", Median(overhead)},
+          {"thread_scaling_2_vs_1", Median(scaling)},
+          {"raw_mj_ray_per_s", Median(rays)},
+          {"camera", {{"width", k.width}, {"height", k.height}}},
+          {"rendered_clouds_per_s_1_core", Median(clouds)},
+          {"rendered_cloud_time_vs_raw_rays", Median(cloud_ratio)}};
+}
+
+}  // namespace twinforge::sim
