@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <unistd.h>
+
 #include <filesystem>
 #include <fstream>
 
@@ -14,7 +16,9 @@ namespace {
 // Writes a copy of the drawer task with `replace` swapped for `with` and returns the error.
 std::string ErrorOfEditedDrawerTask(const std::string& replace, const std::string& with) {
   const auto source = std::filesystem::path(TWINFORGE_ASSETS_DIR) / "tasks/open_drawer";
-  const auto dir = std::filesystem::temp_directory_path() / "twinforge_task_test";
+  // One directory per test process: ctest runs these tests in parallel processes.
+  const auto dir = std::filesystem::temp_directory_path() /
+                   ("twinforge_task_test_" + std::to_string(::getpid()));
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
   std::filesystem::copy_file(source / "scene.xml", dir / "scene.xml");
