@@ -13,28 +13,39 @@
 
 namespace twinforge::app {
 
+namespace {
+
+struct ExpertOptions {
+  std::string task = "open_drawer";
+  int episodes = 100;
+  int episode = 0;
+  int level = 1;
+  uint64_t seed = 0;
+  double noise = 0.0;
+  int threads = core::DefaultThreadCount();
+};
+
+// --task, --level, --seed, --noise, and --episode for commands that show one episode.
+void AddEpisodeOptions(CLI::App* command, ExpertOptions& o, bool one_episode) {
+  command->add_option("--task", o.task, "built-in task name or task.yaml path");
+  command->add_option("--level", o.level, "randomization level 0..3")->check(CLI::Range(0, 3));
+  command->add_option("--seed", o.seed, "seed");
+  command->add_option("--noise", o.noise, "expert action noise")->check(CLI::Range(0.0, 1.0));
+  if (one_episode)
+    command->add_option("--episode", o.episode, "episode index (sim expert lists failed ones)");
+}
+
+}  // namespace
+
 void AddSimCommands(CLI::App& parent, int& exit_code) {
   auto* sim = parent.add_subcommand("sim", "run, measure and look at simulated tasks");
   sim->require_subcommand(1);
 
-  struct ExpertOptions {
-    std::string task = "open_drawer";
-    int episodes = 100;
-    int level = 1;
-    uint64_t seed = 0;
-    double noise = 0.0;
-    int threads = core::DefaultThreadCount();
-  };
   auto expert_options = std::make_shared<ExpertOptions>();
   auto* expert = sim->add_subcommand("expert", "success rate of a task's scripted expert (JSON)");
-  expert->add_option("--task", expert_options->task, "built-in task name or task.yaml path");
+  AddEpisodeOptions(expert, *expert_options, false);
   expert->add_option("--episodes", expert_options->episodes, "episodes")
       ->check(CLI::PositiveNumber);
-  expert->add_option("--level", expert_options->level, "randomization level 0..3")
-      ->check(CLI::Range(0, 3));
-  expert->add_option("--seed", expert_options->seed, "seed");
-  expert->add_option("--noise", expert_options->noise, "expert action noise")
-      ->check(CLI::Range(0.0, 1.0));
   expert->add_option("--threads", expert_options->threads, "worker threads")
       ->check(CLI::PositiveNumber);
   expert->callback([expert_options, &exit_code] {
@@ -55,21 +66,13 @@ void AddSimCommands(CLI::App& parent, int& exit_code) {
   // One expert episode, step by step, for writing and debugging task files.
   auto trace_options = std::make_shared<ExpertOptions>();
   auto* trace = sim->add_subcommand("trace", "print one expert episode step by step (JSON lines)");
-  trace->add_option("--task", trace_options->task, "built-in task name or task.yaml path");
-  trace->add_option("--level", trace_options->level, "randomization level 0..3")
-      ->check(CLI::Range(0, 3));
-  trace->add_option("--seed", trace_options->seed, "seed, as given to sim expert");
-  auto episode = std::make_shared<int>(0);
-  trace->add_option("--episode", *episode, "episode index (sim expert lists failed ones)");
-  trace->add_option("--noise", trace_options->noise, "expert action noise");
-  trace->callback([trace_options, episode, &exit_code] {
+  AddEpisodeOptions(trace, *trace_options, true);
+  trace->callback([trace_options, &exit_code] {
     const auto& o = *trace_options;
     auto task = std::make_shared<const sim::Task>(sim::LoadTaskSpec(o.task));
     sim::Env env(task);
     sim::ScriptedExpert expert(*task, o.noise);
-    const uint64_t seed = core::MixSeed(o.seed, static_cast<uint64_t>(*episode));
-    env.Reset(seed, o.level);
-    core::Rng rng(seed, 0xe4);
+    core::Rng rng = sim::BeginExpertEpisode(env, expert, o.seed, o.episode, o.level);
     std::vector<float> state(env.state_dim());
     for (int t = 0; t < task->spec().horizon; ++t) {
       const sim::Action action = expert.Act(env, rng);
@@ -109,10 +112,7 @@ void AddSimCommands(CLI::App& parent, int& exit_code) {
   auto view_out = std::make_shared<std::string>("frames");
   auto view_size = std::make_shared<std::array<int, 2>>(std::array<int, 2>{320, 240});
   auto* view = sim->add_subcommand("view", "write PNG frames of a scripted episode");
-  view->add_option("--task", view_options->task, "built-in task name or task.yaml path");
-  view->add_option("--level", view_options->level, "randomization level 0..3")
-      ->check(CLI::Range(0, 3));
-  view->add_option("--seed", view_options->seed, "episode seed");
+  AddEpisodeOptions(view, *view_options, true);
   view->add_option("--out", *view_out, "output directory");
   view->add_option("--size", *view_size, "width height")->expected(2);
   view->callback([view_options, view_out, view_size, &exit_code] {
@@ -124,9 +124,7 @@ void AddSimCommands(CLI::App& parent, int& exit_code) {
     const sim::RayCaster caster(sim::MakeCamera(spec));
     sim::Env env(task);
     sim::ScriptedExpert expert(*task, o.noise);
-    const uint64_t seed = core::MixSeed(o.seed, 0);
-    env.Reset(seed, o.level);
-    core::Rng rng(seed, 0xe4);
+    core::Rng rng = sim::BeginExpertEpisode(env, expert, o.seed, o.episode, o.level);
     core::Image frame{spec.width, spec.height, 3, 8,
                       std::vector<uint8_t>(std::size_t(spec.width) * spec.height * 3)};
     std::vector<float> depth(std::size_t(spec.width) * spec.height);

@@ -107,14 +107,17 @@ void Env::Reset(uint64_t seed, int level) {
 void Env::RandomizePoses() {
   mjModel* m = model_.get();
   const mjModel* n = task_->model();
-  for (const auto& group : task_->spec().randomization.groups) {
+  const auto& groups = task_->spec().randomization.groups;
+  for (std::size_t g = 0; g < groups.size(); ++g) {
+    const auto& group = groups[g];
     const Eigen::Vector3d offset(rng_.Uniform(group.x[0], group.x[1]),
                                  rng_.Uniform(group.y[0], group.y[1]),
                                  rng_.Uniform(group.z[0], group.z[1]));
     const core::Quat turn = core::Yaw(rng_.Uniform(group.yaw[0], group.yaw[1]));
     Eigen::Vector3d pivot = Eigen::Vector3d::Zero();
-    for (std::size_t i = 0; i < group.bodies.size(); ++i) {
-      const int b = mj_name2id(m, mjOBJ_BODY, group.bodies[i].c_str());
+    const auto& bodies = task_->index().group_bodies[g];
+    for (std::size_t i = 0; i < bodies.size(); ++i) {
+      const int b = bodies[i];
       const int free = FreeJointOf(m, b);
       double* pos = free >= 0 ? data_->qpos + m->jnt_qposadr[free] : m->body_pos + 3 * b;
       double* quat = pos + (free >= 0 ? 3 : 0);
@@ -135,14 +138,12 @@ void Env::PlaceDistractors() {
   mjModel* m = model_.get();
   const auto& spec = task_->spec().randomization.distractors;
   const auto& index = task_->index();
-  mj_kinematics(m, data_.get());  // object positions after pose randomization
-  std::vector<Eigen::Vector2d> taken;
+  mj_kinematics(m, data_.get());                 // object positions after pose randomization
+  std::vector<Eigen::Vector2d>& taken = taken_;  // reused: resets happen inside VecEnv::Step
+  taken.clear();
   for (int b : index.object_bodies) taken.emplace_back(data_->xpos[3 * b], data_->xpos[3 * b + 1]);
-  for (const auto& group : task_->spec().randomization.groups)
-    for (const auto& name : group.bodies) {
-      const int b = mj_name2id(m, mjOBJ_BODY, name.c_str());
-      taken.emplace_back(data_->xpos[3 * b], data_->xpos[3 * b + 1]);
-    }
+  for (const auto& bodies : index.group_bodies)
+    for (int b : bodies) taken.emplace_back(data_->xpos[3 * b], data_->xpos[3 * b + 1]);
   const int count = static_cast<int>(rng_.Int(spec.count[0], spec.count[1]));
   for (int i = 0; i < count; ++i) {
     const int body = index.distractor_bodies[i];
@@ -174,19 +175,22 @@ void Env::ScheduleDisturbances() {
   const mjModel* m = model_.get();
   const auto& spec = task_->spec();
   const int substeps = spec.control.substeps;
-  for (const auto& d : spec.randomization.disturbances) {
+  const auto& specs = spec.randomization.disturbances;
+  for (std::size_t k = 0; k < specs.size(); ++k) {
+    const auto& d = specs[k];
+    const auto& ids = task_->index().disturbances[k];
     if (!rng_.Bernoulli(d.probability)) continue;
     ActiveDisturbance a;
     const double start = rng_.Uniform(d.window[0], d.window[1]) * spec.horizon;
     a.start_substep = static_cast<int>(start * substeps);
     a.end_substep = a.start_substep + std::max(1, static_cast<int>(d.duration / m->opt.timestep));
     const double magnitude = rng_.Uniform(d.force[0], d.force[1]);
-    if (!d.body.empty()) {
-      a.body = mj_name2id(m, mjOBJ_BODY, d.body.c_str());
+    if (ids.body >= 0) {
+      a.body = ids.body;
       const double angle = rng_.Uniform(-M_PI, M_PI);
       a.force = magnitude * Eigen::Vector3d(std::cos(angle), std::sin(angle), 0.0);
     } else {
-      a.dof = m->jnt_dofadr[mj_name2id(m, mjOBJ_JOINT, d.joint.c_str())];
+      a.dof = ids.dof;
       a.generalized = magnitude;
     }
     disturbances_.push_back(a);
@@ -196,7 +200,7 @@ void Env::ScheduleDisturbances() {
 void Env::RandomizePhysics() {
   mjModel* m = model_.get();
   const auto& p = task_->spec().randomization.physics;
-  const int mount = mj_name2id(m, mjOBJ_BODY, "robot_mount");
+  const int mount = task_->index().robot_mount;
   const double friction = rng_.Uniform(p.friction[0], p.friction[1]);
   const double mass = rng_.Uniform(p.mass[0], p.mass[1]);
   const double damping = rng_.Uniform(p.damping[0], p.damping[1]);

@@ -96,6 +96,7 @@ class Env {
   int level_ = 0;
   int substep_count_ = 0;
   std::vector<ActiveDisturbance> disturbances_;
+  std::vector<Eigen::Vector2d> taken_;  // distractor placement scratch
   std::vector<int> robot_dofs_;
   int last_bad_qacc_ = 0;
 };

@@ -38,9 +38,8 @@ void ScriptedExpert::Advance() {
 }
 
 core::Pose ScriptedExpert::Target(const Env& env, const ExpertStep& step) {
-  const core::Pose anchor = step.site.empty()
-                                ? core::Pose::Identity()
-                                : YawFrame(env.SitePose(task_.Id(mjOBJ_SITE, step.site, "site")));
+  const int site = task_.index().expert_steps[step_].site;
+  const core::Pose anchor = site < 0 ? core::Pose::Identity() : YawFrame(env.SitePose(site));
   core::Pose target;
   target.translation = anchor * Eigen::Vector3d(step.offset.data());
   const core::Quat frame = step.world_orientation ? core::Quat::Identity() : anchor.rotation;
@@ -151,8 +150,8 @@ Action ScriptedExpert::Act(const Env& env, core::Rng& rng) {
     } else {  // drive a joint by moving the grasped part ahead of the grasp
       const mjModel* m = env.model();
       const mjData* d = env.data();
-      const int joint = task_.Id(mjOBJ_JOINT, step.joint, "joint");
-      const int site = task_.Id(mjOBJ_SITE, step.site, "site");
+      const int joint = task_.index().expert_steps[step_].joint;
+      const int site = task_.index().expert_steps[step_].site;
       const double value = d->qpos[m->jnt_qposadr[joint]];
       const core::Pose site_pose = env.SitePose(site);
       if (steps_in_step_ == 0) {
@@ -200,6 +199,14 @@ Action ScriptedExpert::Act(const Env& env, core::Rng& rng) {
 
 namespace twinforge::sim {
 
+core::Rng BeginExpertEpisode(Env& env, ScriptedExpert& expert, uint64_t seed, int64_t episode,
+                             int level) {
+  const uint64_t episode_seed = core::MixSeed(seed, static_cast<uint64_t>(episode));
+  env.Reset(episode_seed, level);
+  expert.Reset();
+  return core::Rng(episode_seed, 0xe4);
+}
+
 ExpertReport EvaluateExpert(std::shared_ptr<const Task> task, int episodes, int level,
                             uint64_t seed, double noise, int threads) {
   ExpertReport report;
@@ -214,10 +221,7 @@ ExpertReport EvaluateExpert(std::shared_ptr<const Task> task, int episodes, int 
     Env env(task, static_cast<int>(block));
     ScriptedExpert expert(*task, noise);
     for (int64_t i = episodes * block / blocks; i < episodes * (block + 1) / blocks; ++i) {
-      const uint64_t episode_seed = core::MixSeed(seed, static_cast<uint64_t>(i));
-      env.Reset(episode_seed, level);
-      expert.Reset();
-      core::Rng rng(episode_seed, 0xe4);
+      core::Rng rng = BeginExpertEpisode(env, expert, seed, i, level);
       for (int t = 0; t < task->spec().horizon; ++t) {
         const StepResult r = env.Step(expert.Act(env, rng));
         if (r.success) {

@@ -58,7 +58,13 @@ struct ExpertReport {
   std::vector<int> failed_seeds;     // episode seeds that failed, to replay them
 };
 
-// Runs the expert for `episodes` episodes at `level` (episode i uses seed MixSeed(seed, i)),
+// Starts episode `episode` of a run seeded `seed` at `level`: resets env and expert and returns
+// the generator of the expert's noise. Every tool that names an episode by (seed, index) starts
+// it here, so `sim trace --episode i` replays episode i of `sim expert`.
+core::Rng BeginExpertEpisode(Env& env, ScriptedExpert& expert, uint64_t seed, int64_t episode,
+                             int level);
+
+// Runs the expert for `episodes` episodes at `level` (episode i begun by BeginExpertEpisode),
 // spread over `threads` threads with one env per thread. An episode succeeds when the success
 // predicates hold at any step; it ends there.
 ExpertReport EvaluateExpert(std::shared_ptr<const Task> task, int episodes, int level,

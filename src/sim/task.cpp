@@ -82,6 +82,7 @@ Task::Task(TaskSpec spec) : spec_(std::move(spec)) {
       mjcf_, spec_.file.string() + " (assembled with " + parts.scene.filename().string() + ")");
 
   index_.robot = RobotIndex::Resolve(model_.get(), robot_);
+  index_.robot_mount = Id(mjOBJ_BODY, "robot_mount", "robot");
   for (std::size_t i = 0; i < spec_.objects.size(); ++i)
     index_.object_bodies.push_back(
         Id(mjOBJ_BODY, spec_.objects[i], "objects[" + std::to_string(i) + "]"));
@@ -114,13 +115,16 @@ Task::Task(TaskSpec spec) : spec_(std::move(spec)) {
     index_.distractor_bodies.push_back(Id(mjOBJ_BODY, name, "randomization.distractors"));
     index_.distractor_geoms.push_back(Id(mjOBJ_GEOM, name, "randomization.distractors"));
   }
-  // Validate every other name the file uses, so a typo fails at load, not mid-episode.
+  // Resolve every other name the file uses once, so a typo fails at load, not mid-episode, and
+  // resets and experts never look names up.
   const auto& r = spec_.randomization;
   for (std::size_t g = 0; g < r.groups.size(); ++g)
     for (std::size_t b = 0; b < r.groups[g].bodies.size(); ++b) {
       const std::string field =
           "randomization.groups[" + std::to_string(g) + "].bodies[" + std::to_string(b) + "]";
+      if (b == 0) index_.group_bodies.emplace_back();
       const int body = Id(mjOBJ_BODY, r.groups[g].bodies[b], field);
+      index_.group_bodies.back().push_back(body);
       const bool free = model_->body_jntnum[body] == 1 &&
                         model_->jnt_type[model_->body_jntadr[body]] == mjJNT_FREE;
       if (!free && model_->body_parentid[body] != 0)
@@ -131,15 +135,20 @@ Task::Task(TaskSpec spec) : spec_(std::move(spec)) {
     }
   for (std::size_t d = 0; d < r.disturbances.size(); ++d) {
     const std::string field = "randomization.disturbances[" + std::to_string(d) + "]";
-    if (!r.disturbances[d].body.empty()) Id(mjOBJ_BODY, r.disturbances[d].body, field + ".body");
+    TaskIndex::Disturbance ids;
+    if (!r.disturbances[d].body.empty())
+      ids.body = Id(mjOBJ_BODY, r.disturbances[d].body, field + ".body");
     if (!r.disturbances[d].joint.empty())
-      Id(mjOBJ_JOINT, r.disturbances[d].joint, field + ".joint");
+      ids.dof = model_->jnt_dofadr[Id(mjOBJ_JOINT, r.disturbances[d].joint, field + ".joint")];
+    index_.disturbances.push_back(ids);
   }
   for (std::size_t s = 0; s < spec_.expert.steps.size(); ++s) {
     const auto& step = spec_.expert.steps[s];
     const std::string field = "expert.steps[" + std::to_string(s) + "]";
-    if (!step.site.empty()) Id(mjOBJ_SITE, step.site, field + ".site");
-    if (!step.joint.empty()) Id(mjOBJ_JOINT, step.joint, field + ".joint");
+    TaskIndex::ExpertStepIds ids;
+    if (!step.site.empty()) ids.site = Id(mjOBJ_SITE, step.site, field + ".site");
+    if (!step.joint.empty()) ids.joint = Id(mjOBJ_JOINT, step.joint, field + ".joint");
+    index_.expert_steps.push_back(ids);
   }
 }
 

@@ -310,7 +310,16 @@ struct TaskIndex {
   std::vector<Predicate> predicates;
   std::vector<int> distractor_bodies;  // mocap bodies
   std::vector<int> distractor_geoms;
-  int table_geom = -1;
+  int robot_mount = -1;                        // body holding the robot
+  std::vector<std::vector<int>> group_bodies;  // per randomization group
+  struct Disturbance {
+    int body = -1, dof = -1;  // one of the two
+  };
+  std::vector<Disturbance> disturbances;  // per randomization.disturbances entry
+  struct ExpertStepIds {
+    int site = -1, joint = -1;  // -1 where the step names none
+  };
+  std::vector<ExpertStepIds> expert_steps;  // per expert step
 };
 
 // A task ready to simulate: its spec, robot, assembled nominal model and resolved names.
