@@ -189,6 +189,7 @@ void Env::ScheduleDisturbances() {
       a.body = ids.body;
       const double angle = rng_.Uniform(-M_PI, M_PI);
       a.force = magnitude * Eigen::Vector3d(std::cos(angle), std::sin(angle), 0.0);
+      a.at = Eigen::Vector3d(d.at.data());
     } else {
       a.dof = ids.dof;
       a.generalized = magnitude;
@@ -226,10 +227,20 @@ void Env::ApplyForces(int substep) {
   for (int dof : robot_dofs_) d->qfrc_applied[dof] = d->qfrc_bias[dof];
   for (const auto& a : disturbances_) {
     const bool on = substep >= a.start_substep && substep < a.end_substep;
-    if (a.body >= 0)
-      for (int c = 0; c < 3; ++c) d->xfrc_applied[6 * a.body + c] = on ? a.force[c] : 0.0;
-    else
+    if (a.body >= 0) {
+      // A force at a point is the force at the centre of mass plus its moment about it.
+      const Eigen::Map<const Eigen::Matrix<mjtNum, 3, 3, Eigen::RowMajor>> rotation(d->xmat +
+                                                                                    9 * a.body);
+      const Eigen::Vector3d point = Eigen::Vector3d(d->xpos + 3 * a.body) + rotation * a.at;
+      const Eigen::Vector3d torque =
+          (point - Eigen::Vector3d(d->xipos + 3 * a.body)).cross(a.force);
+      for (int c = 0; c < 3; ++c) {
+        d->xfrc_applied[6 * a.body + c] = on ? a.force[c] : 0.0;
+        d->xfrc_applied[6 * a.body + 3 + c] = on ? torque[c] : 0.0;
+      }
+    } else {
       d->qfrc_applied[a.dof] = on ? a.generalized : 0.0;
+    }
   }
 }
 

@@ -73,6 +73,7 @@ class Env {
   struct ActiveDisturbance {
     int body = -1, dof = -1;
     Eigen::Vector3d force = Eigen::Vector3d::Zero();
+    Eigen::Vector3d at = Eigen::Vector3d::Zero();  // point of application, body frame
     double generalized = 0;
     int start_substep = 0, end_substep = 0;
   };

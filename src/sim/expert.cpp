@@ -1,5 +1,6 @@
 #include "sim/expert.h"
 
+#include <array>
 #include <cmath>
 
 namespace twinforge::sim {
@@ -21,7 +22,49 @@ core::Pose YawFrame(const core::Pose& pose) {
   return {pose.translation, core::Yaw(std::atan2(r(1, 0), r(0, 0)))};
 }
 
+// A greedy descent on the move grid stops up to half a step (1.5 cm) from its goal. Turns
+// shift the grid: turn, move, turn back and move back lands 6 mm sideways. So a refining step
+// searches every sequence of up to kRefineDepth moves and takes the first move of the one that
+// ends nearest the goal, each move costing kMoveCost (squared step units) so that a detour is
+// taken only for a real gain.
+constexpr int kRefineDepth = 4;
+constexpr double kMoveCost = 0.005;
+
+struct MoveSearch {
+  std::array<core::Pose, 12> moves;
+  core::Pose goal;  // in the frame of the start pose
+  double translation_step, rotation_step;
+
+  double Error(const core::Pose& p) const {
+    const Eigen::Vector3d t = (goal.translation - p.translation) / translation_step;
+    const double angle = core::AngleBetween(goal.rotation, p.rotation) / rotation_step;
+    return t.squaredNorm() + angle * angle;
+  }
+  // Least cost over sequences of at most `left` moves from `p` that never undo their last move.
+  double Best(const core::Pose& p, int left, int previous) const {
+    double best = Error(p);
+    if (left == 0) return best;
+    for (int move = 0; move < 12; ++move)
+      if ((move ^ 1) != previous)
+        best = std::min(best, kMoveCost + Best(p * moves[move], left - 1, move));
+    return best;
+  }
+};
+
 }  // namespace
+
+int RefiningMove(const core::Pose& goal, const ActionLimits& limits) {
+  MoveSearch search{{}, goal, limits.translation, limits.rotation};
+  for (int move = 0; move < 12; ++move)
+    search.moves[move] = DecodeAction(Action::Discrete(move), limits, GripperState{}).delta;
+  double best_cost = search.Error(core::Pose::Identity()) - 1e-9;
+  int best = -1;
+  for (int move = 0; move < 12; ++move) {
+    const double cost = kMoveCost + search.Best(search.moves[move], kRefineDepth - 1, move);
+    if (cost < best_cost) best_cost = cost, best = move;
+  }
+  return best;
+}
 
 ScriptedExpert::ScriptedExpert(const Task& task, double noise) : task_(task), noise_(noise) {}
 
@@ -38,10 +81,20 @@ void ScriptedExpert::Advance() {
 }
 
 core::Pose ScriptedExpert::Target(const Env& env, const ExpertStep& step) {
-  const int site = task_.index().expert_steps[step_].site;
-  const core::Pose anchor = site < 0 ? core::Pose::Identity() : YawFrame(env.SitePose(site));
+  const auto& ids = task_.index().expert_steps[step_];
+  const core::Pose anchor =
+      ids.site < 0 ? core::Pose::Identity() : YawFrame(env.SitePose(ids.site));
   core::Pose target;
   target.translation = anchor * Eigen::Vector3d(step.offset.data());
+  if (ids.carry >= 0) {
+    if (steps_in_step_ == 0) {
+      const core::Pose ee = env.EePose();
+      carry_target_.translation =
+          target.translation + ee.translation - env.SitePose(ids.carry).translation;
+      carry_target_.rotation = ee.rotation;
+    }
+    return carry_target_;
+  }
   const core::Quat frame = step.world_orientation ? core::Quat::Identity() : anchor.rotation;
   const Eigen::Vector3d approach = frame * Eigen::Vector3d(step.approach.data());
   const Eigen::Vector3d fingers = frame * Eigen::Vector3d(step.fingers.data());
@@ -94,8 +147,12 @@ Action ScriptedExpert::Toward(const Env& env, const core::Pose& target, double c
     const bool undo =
         steps_in_step_ > 0 && last_move_ >= 0 && best >= 0 && (best ^ 1) == last_move_;
     if (best < 0 || undo) {
-      at_grid_target_ = true;
-      return HoldStill(env);
+      best = task_.spec().expert.steps[step_].refine ? RefiningMove(ee.Inverse() * target, limits)
+                                                     : -1;
+      if (best < 0) {
+        at_grid_target_ = true;
+        return HoldStill(env);
+      }
     }
     last_move_ = best;
     return Action::Discrete(best);

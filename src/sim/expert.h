@@ -37,14 +37,17 @@ class ScriptedExpert {
   double noise_;
   int step_ = 0;
   int steps_in_step_ = 0;
-  core::Pose grasp_in_site_;  // drive steps: tool pose relative to the site at the step start
-  bool flip_fingers_ = false;
-  double drive_sign_ = 1.0;  // drive steps: direction of travel of the joint
-  bool at_grid_target_ = false;
-  int last_move_ =
-      -1;  // discrete: the previous motion of this step  // discrete: no move brings the tool
-           // closer to the target  // move steps: which of the two finger directions to use
+  core::Pose grasp_in_site_;     // drive steps: tool pose relative to the site at the step start
+  bool flip_fingers_ = false;    // move steps: which of the two finger directions to use
+  double drive_sign_ = 1.0;      // drive steps: direction of travel of the joint
+  bool at_grid_target_ = false;  // discrete: no move brings the tool closer to the target
+  int last_move_ = -1;           // discrete: the previous motion of this step
+  core::Pose carry_target_;      // carry steps: the tool target, fixed when the step starts
 };
+
+// Discrete actions, at the limit of the move grid: the first move of the best short sequence
+// (turns and moves) toward `goal`, given in the tool frame; -1 when staying put is best.
+int RefiningMove(const core::Pose& goal, const ActionLimits& limits);
 
 }  // namespace twinforge::sim
 

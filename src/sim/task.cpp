@@ -148,6 +148,7 @@ Task::Task(TaskSpec spec) : spec_(std::move(spec)) {
     TaskIndex::ExpertStepIds ids;
     if (!step.site.empty()) ids.site = Id(mjOBJ_SITE, step.site, field + ".site");
     if (!step.joint.empty()) ids.joint = Id(mjOBJ_JOINT, step.joint, field + ".joint");
+    if (!step.carry.empty()) ids.carry = Id(mjOBJ_SITE, step.carry, field + ".carry");
     index_.expert_steps.push_back(ids);
   }
 }

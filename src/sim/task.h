@@ -97,6 +97,7 @@ struct DisturbanceSpec {
   double duration = 0.3;   // s
   Range window{0.2, 0.6};  // when it starts, as a fraction of the horizon
   double probability = 1.0;
+  std::array<double, 3> at{0, 0, 0};  // body: where the push lands, in the body frame (m)
   template <class A>
   void Serialize(A& a) {
     a("body", body);
@@ -105,6 +106,7 @@ struct DisturbanceSpec {
     a("duration", duration);
     a("window", window);
     a("probability", probability);
+    a("at", at);
     a.Require(body.empty() != joint.empty(), "body", "exactly one of body or joint");
   }
 };
@@ -152,6 +154,9 @@ struct ExpertStep {
   std::array<double, 3> approach{0, 0, -1};  // tool z in the anchor frame (default: down)
   std::array<double, 3> fingers{0, 1, 0};    // tool y in the anchor frame (sign is free)
   bool world_orientation = false;            // orientation in the base frame, not the anchor's
+  // move: a site on the held object; the step carries that site to the target (fixed when the
+  // step starts) and keeps the tool's orientation.
+  std::string carry;
   GripCommand gripper = GripCommand::kKeep;
   std::string joint;                 // drive: the joint to move
   double to = 0.0;                   // drive: target joint value
@@ -160,6 +165,9 @@ struct ExpertStep {
   double tolerance = 0.012;          // m, move: position tolerance
   double rotation_tolerance = 0.12;  // rad
   int max_steps = 60;                // give up on the step after this many control steps
+  // move, discrete actions: at the limit of the 3 cm grid, keep going with combined turns and
+  // moves (slower; for a grasp that needs a few mm, made where there is room to turn).
+  bool refine = false;
   template <class A>
   void Serialize(A& a) {
     a.Enum("type", type,
@@ -171,6 +179,7 @@ struct ExpertStep {
     a("approach", approach);
     a("fingers", fingers);
     a("world_orientation", world_orientation);
+    a("carry", carry);
     a.Enum("gripper", gripper,
            {{"keep", GripCommand::kKeep},
             {"open", GripCommand::kOpen},
@@ -182,6 +191,7 @@ struct ExpertStep {
     a("tolerance", tolerance);
     a("rotation_tolerance", rotation_tolerance);
     a("max_steps", max_steps);
+    a("refine", refine);
     a.Require(type != ExpertStepType::kDrive || !joint.empty(), "joint",
               "a joint name for a drive step");
     a.Require(type != ExpertStepType::kGrip || gripper != GripCommand::kKeep, "gripper",
@@ -317,7 +327,7 @@ struct TaskIndex {
   };
   std::vector<Disturbance> disturbances;  // per randomization.disturbances entry
   struct ExpertStepIds {
-    int site = -1, joint = -1;  // -1 where the step names none
+    int site = -1, joint = -1, carry = -1;  // -1 where the step names none
   };
   std::vector<ExpertStepIds> expert_steps;  // per expert step
 };
