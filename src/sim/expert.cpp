@@ -82,30 +82,40 @@ void ScriptedExpert::Advance() {
 
 core::Pose ScriptedExpert::Target(const Env& env, const ExpertStep& step) {
   const auto& ids = task_.index().expert_steps[step_];
-  const core::Pose anchor =
-      ids.site < 0 ? core::Pose::Identity() : YawFrame(env.SitePose(ids.site));
+  const core::Pose ee = env.EePose();
+  const bool first = steps_in_step_ == 0;
+  core::Pose anchor = ids.site < 0 ? core::Pose::Identity() : YawFrame(env.SitePose(ids.site));
+  // An anchor on the carried object itself ("lift it 16 cm") is taken where the step starts,
+  // or the target would run ahead of the tool.
+  const mjModel* m = env.model();
+  if (ids.carry >= 0 && ids.site >= 0 && m->site_bodyid[ids.site] == m->site_bodyid[ids.carry]) {
+    if (first) frozen_anchor_ = anchor;
+    anchor = frozen_anchor_;
+  }
   core::Pose target;
   target.translation = anchor * Eigen::Vector3d(step.offset.data());
+  if (step.keep_orientation) {
+    if (first) kept_rotation_ = ee.rotation;
+    target.rotation = kept_rotation_;
+  } else {
+    const core::Quat frame = step.world_orientation ? core::Quat::Identity() : anchor.rotation;
+    const Eigen::Vector3d approach = frame * Eigen::Vector3d(step.approach.data());
+    const Eigen::Vector3d fingers = frame * Eigen::Vector3d(step.fingers.data());
+    // A parallel gripper is symmetric: of the two finger directions take the one nearer the
+    // tool when the step starts, and keep it for the whole step.
+    const core::Quat a = ToolOrientation(approach, fingers),
+                     b = ToolOrientation(approach, -fingers);
+    if (first)
+      flip_fingers_ = core::AngleBetween(b, ee.rotation) < core::AngleBetween(a, ee.rotation);
+    target.rotation = flip_fingers_ ? b : a;
+  }
   if (ids.carry >= 0) {
-    if (steps_in_step_ == 0) {
-      const core::Pose ee = env.EePose();
-      carry_target_.translation =
-          target.translation + ee.translation - env.SitePose(ids.carry).translation;
-      carry_target_.rotation = ee.rotation;
-    }
-    return carry_target_;
+    // The target is for the carried site: place the tool so that, holding the object as it
+    // does now, the site lands there.
+    const Eigen::Vector3d site_in_tool =
+        ee.rotation.conjugate() * (env.SitePose(ids.carry).translation - ee.translation);
+    target.translation -= target.rotation * site_in_tool;
   }
-  const core::Quat frame = step.world_orientation ? core::Quat::Identity() : anchor.rotation;
-  const Eigen::Vector3d approach = frame * Eigen::Vector3d(step.approach.data());
-  const Eigen::Vector3d fingers = frame * Eigen::Vector3d(step.fingers.data());
-  // A parallel gripper is symmetric: of the two finger directions take the one nearer the tool
-  // when the step starts, and keep it for the whole step.
-  const core::Quat a = ToolOrientation(approach, fingers), b = ToolOrientation(approach, -fingers);
-  if (steps_in_step_ == 0) {
-    const core::Quat now = env.EePose().rotation;
-    flip_fingers_ = core::AngleBetween(b, now) < core::AngleBetween(a, now);
-  }
-  target.rotation = flip_fingers_ ? b : a;
   return target;
 }
 
@@ -157,9 +167,11 @@ Action ScriptedExpert::Toward(const Env& env, const core::Pose& target, double c
     last_move_ = best;
     return Action::Discrete(best);
   }
+  const double speed = task_.spec().expert.steps[step_].speed;
+  const double step_length = speed > 0 ? std::min(speed, limits.translation) : limits.translation;
   Action a = Action::Continuous({});
   for (int k = 0; k < 3; ++k) {
-    a.value[k] = std::clamp(dp[k], -limits.translation, limits.translation);
+    a.value[k] = std::clamp(dp[k], -step_length, step_length);
     a.value[3 + k] = std::clamp(dr[k], -limits.rotation, limits.rotation);
   }
   a.value[6] = 2.0 * closure - 1.0;

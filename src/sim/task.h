@@ -154,9 +154,11 @@ struct ExpertStep {
   std::array<double, 3> approach{0, 0, -1};  // tool z in the anchor frame (default: down)
   std::array<double, 3> fingers{0, 1, 0};    // tool y in the anchor frame (sign is free)
   bool world_orientation = false;            // orientation in the base frame, not the anchor's
-  // move: a site on the held object; the step carries that site to the target (fixed when the
-  // step starts) and keeps the tool's orientation.
+  // move: a site on the held object; the step brings that site, not the tool, to the target
+  // (an anchor on the held object itself is taken where the step starts).
   std::string carry;
+  bool keep_orientation = false;  // move: hold the tool orientation the step starts with
+  double speed = 0;               // move, continuous actions: m per step at most (0 = limit)
   GripCommand gripper = GripCommand::kKeep;
   std::string joint;                 // drive: the joint to move
   double to = 0.0;                   // drive: target joint value
@@ -180,6 +182,9 @@ struct ExpertStep {
     a("fingers", fingers);
     a("world_orientation", world_orientation);
     a("carry", carry);
+    a("keep_orientation", keep_orientation);
+    a("speed", speed);
+    a.Require(speed >= 0, "speed", "a non-negative step length in m");
     a.Enum("gripper", gripper,
            {{"keep", GripCommand::kKeep},
             {"open", GripCommand::kOpen},

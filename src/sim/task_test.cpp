@@ -36,7 +36,7 @@ std::string ErrorOfEditedDrawerTask(const std::string& replace, const std::strin
 
 TEST(Task, BuiltinTasksLoad) {
   const auto names = BuiltinTasks();
-  for (const char* expected : {"open_drawer", "open_cabinet", "mug_on_shelf"})
+  for (const char* expected : {"open_drawer", "open_cabinet", "mug_on_shelf", "peg_insertion"})
     EXPECT_NE(std::find(names.begin(), names.end(), expected), names.end()) << expected;
   for (const auto& name : names) EXPECT_NO_THROW(Task(LoadTaskSpec(name))) << name;
 }
