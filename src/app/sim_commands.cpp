@@ -121,8 +121,8 @@ void AddSimCommands(CLI::App& parent, int& exit_code) {
     sim::CameraSpec spec = task->spec().camera;
     spec.width = (*view_size)[0];
     spec.height = (*view_size)[1];
-    const sim::RayCaster caster(sim::MakeCamera(spec));
     sim::Env env(task);
+    sim::RayCaster caster(sim::MakeCamera(spec), env.model());
     sim::ScriptedExpert expert(*task, o.noise);
     core::Rng rng = sim::BeginExpertEpisode(env, expert, o.seed, o.episode, o.level);
     core::Image frame{spec.width, spec.height, 3, 8,

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <functional>
+#include <thread>
 
 #include "sim/camera.h"
 #include "sim/vec_env.h"
@@ -33,24 +34,43 @@ nlohmann::json RunSimBench(std::shared_ptr<const Task> task, const BenchOptions&
   // batching.
   Env reference(task);
   reference.Reset(0, 1);
-  ModelPtr model(mj_copyModel(nullptr, reference.model()));
-  DataPtr data = MakeData(model.get());
   const auto& robot = task->index().robot;
-  core::Rng raw_rng(7);
-  auto raw_run = [&] {
-    mj_resetData(model.get(), data.get());
-    mju_copy(data->qpos, reference.data()->qpos, model->nq);
-    mju_copy(data->ctrl, reference.data()->ctrl, model->nu);
+  struct RawSim {
+    ModelPtr model;
+    DataPtr data;
+    core::Rng rng;
+  };
+  auto make_raw = [&](uint64_t seed) {
+    RawSim sim{ModelPtr(mj_copyModel(nullptr, reference.model())), nullptr, core::Rng(seed)};
+    sim.data = MakeData(sim.model.get());
+    return sim;
+  };
+  auto raw_steps = [&](RawSim& sim) {
+    mjModel* m = sim.model.get();
+    mjData* d = sim.data.get();
+    mj_resetData(m, d);
+    mju_copy(d->qpos, reference.data()->qpos, m->nq);
+    mju_copy(d->ctrl, reference.data()->ctrl, m->nu);
     for (int i = 0; i < options.raw_steps; ++i) {
       if (i % substeps == 0)
         for (int k = 0; k < kArmDof; ++k)
-          data->ctrl[robot.arm_actuator[k]] =
-              reference.data()->ctrl[robot.arm_actuator[k]] + raw_rng.Uniform(-0.05, 0.05);
+          d->ctrl[robot.arm_actuator[k]] =
+              reference.data()->ctrl[robot.arm_actuator[k]] + sim.rng.Uniform(-0.05, 0.05);
       for (int k = 0; k < kArmDof; ++k)
-        data->qfrc_applied[robot.arm_dof[k]] = data->qfrc_bias[robot.arm_dof[k]];
-      mj_step(model.get(), data.get());
+        d->qfrc_applied[robot.arm_dof[k]] = d->qfrc_bias[robot.arm_dof[k]];
+      mj_step(m, d);
     }
     return double(options.raw_steps);
+  };
+  RawSim raw_a = make_raw(7), raw_b = make_raw(8);
+  auto raw_run = [&] { return raw_steps(raw_a); };
+  // The same on two threads at once, one simulation each: what this machine's two cores give
+  // to perfectly independent work, the ceiling for the VecEnv's scaling.
+  auto raw_run_2 = [&] {
+    std::thread other([&] { raw_steps(raw_b); });
+    raw_steps(raw_a);
+    other.join();
+    return 2.0 * options.raw_steps;
   };
 
   // VecEnv physics steps with random discrete actions.
@@ -67,19 +87,34 @@ nlohmann::json RunSimBench(std::shared_ptr<const Task> task, const BenchOptions&
     return double(options.control_steps) * vec.num_envs() * substeps;
   };
 
-  // Baseline: raw mj_ray, one ray per pixel of the task camera's image, scene geoms only.
+  // Baselines: raw mj_ray and raw Embree casts, one ray per pixel of the task camera's image,
+  // scene geoms only, the scene left where it is.
   CloudMaker maker(*task, reference.model(), {});
   const auto& k = maker.caster().camera().intrinsics;
   const int pixels = k.width * k.height;
+  auto ray_direction = [&](int i) {
+    return Eigen::Vector3d(-1.0, (i % k.width - k.width / 2) * 0.01, -0.7 + (i / k.width) * 0.01)
+        .normalized();
+  };
+  const mjtNum origin[3] = {1.1, 0.0, 0.7};
   auto ray_run = [&] {
     mjtByte groups[mjNGROUP] = {1, 0, 1, 1, 1, 1};
-    const mjtNum origin[3] = {1.1, 0.0, 0.7};
     int geom = -1;
     for (int c = 0; c < options.clouds; ++c)
       for (int i = 0; i < pixels; ++i) {
-        const mjtNum dir[3] = {-1.0, (i % k.width - k.width / 2) * 0.01,
-                               -0.7 + (i / k.width) * 0.01};
-        mj_ray(reference.model(), reference.data(), origin, dir, groups, 1, -1, &geom);
+        const Eigen::Vector3d dir = ray_direction(i);
+        mj_ray(reference.model(), reference.data(), origin, dir.data(), groups, 1, -1, &geom);
+      }
+    return double(options.clouds) * pixels;
+  };
+  GeomScene& geoms = maker.caster().scene();
+  geoms.Update(reference.model(), reference.data(), 1u << kRobotGeomGroup);
+  auto embree_run = [&] {
+    const float from[3] = {float(origin[0]), float(origin[1]), float(origin[2])};
+    for (int c = 0; c < options.clouds; ++c)
+      for (int i = 0; i < pixels; ++i) {
+        const Eigen::Vector3f dir = ray_direction(i).cast<float>();
+        geoms.Cast(from, dir.data());
       }
     return double(options.clouds) * pixels;
   };
@@ -94,16 +129,20 @@ nlohmann::json RunSimBench(std::shared_ptr<const Task> task, const BenchOptions&
 
   // Each repeat measures everything back to back, so ratios compare runs seconds apart on a
   // shared, noisy machine; medians over repeats.
-  std::vector<double> raw, v1, v2, rays, clouds, overhead, scaling, cloud_ratio;
+  std::vector<double> raw, raw2, v1, v2, rays, embree_rays, clouds, overhead, scaling, raw_scaling,
+      cloud_ratio;
   for (int r = 0; r < options.repeats; ++r) {
     raw.push_back(Rate(raw_run));
+    raw2.push_back(Rate(raw_run_2));
     v1.push_back(Rate([&] { return vec_run(vec1); }));
     v2.push_back(Rate([&] { return vec_run(vec2); }));
     rays.push_back(Rate(ray_run));
+    embree_rays.push_back(Rate(embree_run));
     clouds.push_back(Rate(cloud_run));
     overhead.push_back(raw.back() / v1.back() - 1.0);
     scaling.push_back(v2.back() / v1.back());
-    cloud_ratio.push_back((rays.back() / pixels) / clouds.back());
+    raw_scaling.push_back(raw2.back() / raw.back());
+    cloud_ratio.push_back((embree_rays.back() / pixels) / clouds.back());
   }
 
   return {{"task", task->spec().name},
@@ -114,10 +153,13 @@ nlohmann::json RunSimBench(std::shared_ptr<const Task> task, const BenchOptions&
           {"vecenv_physics_steps_per_s_2_threads", Median(v2)},
           {"vecenv_overhead_vs_raw", Median(overhead)},
           {"thread_scaling_2_vs_1", Median(scaling)},
+          {"raw_mj_step_thread_scaling_2_vs_1", Median(raw_scaling)},
+          {"thread_scaling_vs_raw_ceiling", Median(scaling) / Median(raw_scaling)},
           {"raw_mj_ray_per_s", Median(rays)},
+          {"raw_embree_ray_per_s", Median(embree_rays)},
           {"camera", {{"width", k.width}, {"height", k.height}}},
           {"rendered_clouds_per_s_1_core", Median(clouds)},
-          {"rendered_cloud_time_vs_raw_rays", Median(cloud_ratio)}};
+          {"rendered_cloud_time_vs_raw_embree_rays", Median(cloud_ratio)}};
 }
 
 }  // namespace twinforge::sim

@@ -1,5 +1,6 @@
 // Simulation throughput, measured against baselines taken in the same process: raw mj_step on the
-// task model (for VecEnv overhead and thread scaling) and raw mj_ray (for cloud rendering).
+// task model (for VecEnv overhead and thread scaling), raw mj_ray and raw Embree ray casts (for
+// cloud rendering: the clouds are cast with Embree; mj_ray shows what that gains).
 #pragma once
 
 #include <memory>

@@ -99,7 +99,7 @@ Workspace MakeWorkspace(const WorkspaceSpec& spec) {
   return w;
 }
 
-RayCaster::RayCaster(const Camera& camera) : camera_(camera) {
+RayCaster::RayCaster(const Camera& camera, const mjModel* m) : camera_(camera), scene_(m) {
   const auto& k = camera.intrinsics;
   directions_.resize(3 * k.width * k.height);
   z_scale_.resize(k.width * k.height);
@@ -114,29 +114,27 @@ RayCaster::RayCaster(const Camera& camera) : camera_(camera) {
 }
 
 void RayCaster::Render(const mjModel* m, const mjData* d, const core::Pose& base, float* depth,
-                       uint8_t* rgb, bool include_robot) const {
+                       uint8_t* rgb, bool include_robot) {
   const auto& k = camera_.intrinsics;
   const core::Pose world_from_camera = base * camera_.pose;
   const RowMat3 rotation = world_from_camera.rotation.toRotationMatrix();
-  const Eigen::Vector3d origin = world_from_camera.translation;
-  mjtByte groups[mjNGROUP] = {1, 1, 1, 1, 1, 1};
-  if (!include_robot) groups[kRobotGeomGroup] = 0;
+  const Eigen::Vector3f origin = world_from_camera.translation.cast<float>();
+  scene_.Update(m, d, include_robot ? 0u : 1u << kRobotGeomGroup);
   const int n = k.width * k.height;
   for (int i = 0; i < n; ++i) {
-    const Eigen::Vector3d dir = rotation * Eigen::Map<const Eigen::Vector3d>(&directions_[3 * i]);
-    int geom = -1;
-    const mjtNum distance = mj_ray(m, d, origin.data(), dir.data(), groups, 1, -1, &geom);
-    const bool hit = distance >= 0 && geom >= 0;
-    depth[i] = hit ? static_cast<float>(distance * z_scale_[i]) : 0.0f;
+    const Eigen::Vector3f dir =
+        (rotation * Eigen::Map<const Eigen::Vector3d>(&directions_[3 * i])).cast<float>();
+    const GeomScene::Hit hit = scene_.Cast(origin.data(), dir.data());
+    depth[i] = hit.geom >= 0 ? static_cast<float>(hit.distance * z_scale_[i]) : 0.0f;
     if (!rgb) continue;
-    if (!hit) {
+    if (hit.geom < 0) {
       rgb[3 * i] = rgb[3 * i + 1] = rgb[3 * i + 2] = 0;
       continue;
     }
-    const int mat = m->geom_matid[geom];
-    const float* color = mat >= 0 ? m->mat_rgba + 4 * mat : m->geom_rgba + 4 * geom;
-    // Light from above: surfaces lit by their height above the table, darkened with distance.
-    const double shade = std::clamp(1.0 - 0.25 * (distance - 0.5), 0.55, 1.0);
+    const int mat = m->geom_matid[hit.geom];
+    const float* color = mat >= 0 ? m->mat_rgba + 4 * mat : m->geom_rgba + 4 * hit.geom;
+    // Surfaces darkened with distance from the camera.
+    const double shade = std::clamp(1.0 - 0.25 * (hit.distance - 0.5), 0.55, 1.0);
     for (int c = 0; c < 3; ++c)
       rgb[3 * i + c] = static_cast<uint8_t>(std::clamp(color[c] * shade, 0.0, 1.0) * 255.0 + 0.5);
   }
@@ -284,7 +282,7 @@ void ResamplePoints(const float* points, int n, int count, core::Rng& rng, float
 CloudMaker::CloudMaker(const Task& task, const mjModel* m, const Options& options)
     : options_(options),
       workspace_(MakeWorkspace(task.spec().workspace)),
-      caster_(MakeCamera(task.spec().camera)),
+      caster_(MakeCamera(task.spec().camera), m),
       scene_sampler_(m, ~(1u << kRobotGeomGroup)),
       arm_sampler_(m, 1u << kRobotGeomGroup) {
   const auto& k = caster_.camera().intrinsics;

@@ -12,6 +12,7 @@
 
 #include "core/rng.h"
 #include "core/se3.h"
+#include "sim/geom_scene.h"
 #include "sim/model.h"
 #include "sim/task.h"
 
@@ -50,18 +51,22 @@ struct DepthNoise {
 // Geom groups seen by cameras and samplers. The robot's geoms are in group 1.
 constexpr int kRobotGeomGroup = 1;
 
-// Ray-casts depth (metres along the optical axis, 0 = no return) and RGB images.
+// Ray-casts depth (metres along the optical axis, 0 = no return) and RGB images of a model's
+// geoms (through an Embree scene built once from `m`; see sim/geom_scene.h).
 class RayCaster {
  public:
-  explicit RayCaster(const Camera& camera);
+  RayCaster(const Camera& camera, const mjModel* m);
   // Renders into depth[width*height] and, if not null, rgb[width*height*3]. `base` is the robot
   // base pose in the world. Robot geoms are skipped unless `include_robot`. Allocation-free.
+  // `m` must have the layout of the constructor's model (its sizes and colours may differ).
   void Render(const mjModel* m, const mjData* d, const core::Pose& base, float* depth, uint8_t* rgb,
-              bool include_robot = false) const;
+              bool include_robot = false);
   const Camera& camera() const { return camera_; }
+  GeomScene& scene() { return scene_; }
 
  private:
   Camera camera_;
+  GeomScene scene_;
   std::vector<double> directions_;  // unit ray per pixel, camera frame (3 per pixel)
   std::vector<double> z_scale_;     // optical-axis component of each ray
 };
@@ -115,7 +120,7 @@ class CloudMaker {
   void Make(const mjModel* m, const mjData* d, const core::Pose& base, core::Rng& rng, float* scene,
             float* arm);
   const Options& options() const { return options_; }
-  const RayCaster& caster() const { return caster_; }
+  RayCaster& caster() { return caster_; }
 
  private:
   Options options_;
