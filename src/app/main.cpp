@@ -3,6 +3,7 @@
 #include <iostream>
 
 #include "app/doctor.h"
+#include "app/reality_commands.h"
 #include "app/sim_commands.h"
 #include "core/error.h"
 #include "core/log.h"
@@ -22,6 +23,7 @@ int main(int argc, char** argv) {
   int exit_code = 0;
   doctor->callback([&] { exit_code = app::RunDoctor(std::cout); });
   app::AddSimCommands(app, exit_code);
+  app::AddRealityCommands(app, exit_code);
 
   try {
     app.parse(argc, argv);

@@ -114,7 +114,7 @@ RayCaster::RayCaster(const Camera& camera, const mjModel* m) : camera_(camera), 
 }
 
 void RayCaster::Render(const mjModel* m, const mjData* d, const core::Pose& base, float* depth,
-                       uint8_t* rgb, bool include_robot) {
+                       uint8_t* rgb, bool include_robot, int* geom) {
   const auto& k = camera_.intrinsics;
   const core::Pose world_from_camera = base * camera_.pose;
   const RowMat3 rotation = world_from_camera.rotation.toRotationMatrix();
@@ -126,6 +126,7 @@ void RayCaster::Render(const mjModel* m, const mjData* d, const core::Pose& base
         (rotation * Eigen::Map<const Eigen::Vector3d>(&directions_[3 * i])).cast<float>();
     const GeomScene::Hit hit = scene_.Cast(origin.data(), dir.data());
     depth[i] = hit.geom >= 0 ? static_cast<float>(hit.distance * z_scale_[i]) : 0.0f;
+    if (geom) geom[i] = hit.geom;
     if (!rgb) continue;
     if (hit.geom < 0) {
       rgb[3 * i] = rgb[3 * i + 1] = rgb[3 * i + 2] = 0;

@@ -56,11 +56,12 @@ constexpr int kRobotGeomGroup = 1;
 class RayCaster {
  public:
   RayCaster(const Camera& camera, const mjModel* m);
-  // Renders into depth[width*height] and, if not null, rgb[width*height*3]. `base` is the robot
-  // base pose in the world. Robot geoms are skipped unless `include_robot`. Allocation-free.
-  // `m` must have the layout of the constructor's model (its sizes and colours may differ).
+  // Renders into depth[width*height] and, if not null, rgb[width*height*3] and geom[width*height]
+  // (the geom seen, -1 for none). `base` is the robot base pose in the world. Robot geoms are
+  // skipped unless `include_robot`. Allocation-free. `m` must have the layout of the
+  // constructor's model (its sizes and colours may differ).
   void Render(const mjModel* m, const mjData* d, const core::Pose& base, float* depth, uint8_t* rgb,
-              bool include_robot = false);
+              bool include_robot = false, int* geom = nullptr);
   const Camera& camera() const { return camera_; }
   GeomScene& scene() { return scene_; }
 

@@ -245,15 +245,21 @@ void Env::ApplyForces(int substep) {
 }
 
 StepResult Env::Step(const Action& action) {
+  return StepTargets(ActionToJointTargets(kinematics_, ArmPositions(), action,
+                                          task_->spec().control.limits, gripper_));
+}
+
+StepResult Env::StepTargets(const JointTargets& targets, SubstepHook* hook) {
   const auto& spec = task_->spec();
   const auto& r = task_->index().robot;
-  const JointTargets targets =
-      ActionToJointTargets(kinematics_, ArmPositions(), action, spec.control.limits, gripper_);
+  if (!targets.arm.allFinite() || !std::isfinite(targets.finger))
+    throw core::NumericError("joint targets are not finite");
   gripper_.closure = targets.closure;
   for (int k = 0; k < kArmDof; ++k) data_->ctrl[r.arm_actuator[k]] = targets.arm[k];
   for (int k = 0; k < 2; ++k) data_->ctrl[r.finger_actuator[k]] = targets.finger;
   for (int s = 0; s < spec.control.substeps; ++s) {
     ApplyForces(substep_count_++);
+    if (hook) hook->BeforeSubstep(model_.get(), data_.get());
     mj_step(model_.get(), data_.get());
   }
   ++steps_;

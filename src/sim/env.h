@@ -37,6 +37,17 @@ class Env {
   // Applies one action for one control period. Throws core::NumericError on NaN/inf input.
   StepResult Step(const Action& action);
 
+  // Something that runs before every physics step and may rewrite the actuator controls: the
+  // proxy reality's own low-level controller (latency, target interpolation).
+  class SubstepHook {
+   public:
+    virtual ~SubstepHook() = default;
+    virtual void BeforeSubstep(const mjModel* m, mjData* d) = 0;
+  };
+  // Follows joint targets for one control period (Step without the action decoding). With a
+  // hook, the targets are only written to `ctrl` before the hook runs.
+  StepResult StepTargets(const JointTargets& targets, SubstepHook* hook = nullptr);
+
   // Whether every success predicate holds now.
   bool Success() const;
 

@@ -64,7 +64,9 @@ int Task::Id(mjtObj type, const std::string& name, const std::string& field) con
   return id;
 }
 
-Task::Task(TaskSpec spec) : spec_(std::move(spec)) {
+Task::Task(TaskSpec spec) : Task(std::move(spec), ModelEdit{}) {}
+
+Task::Task(TaskSpec spec, const ModelEdit& edit) : spec_(std::move(spec)) {
   const auto dir = spec_.file.parent_path();
   robot_ = LoadRobotSpec(spec_.robot.empty() ? DefaultRobotPath() : dir / spec_.robot);
   MjcfParts parts;
@@ -151,6 +153,7 @@ Task::Task(TaskSpec spec) : spec_(std::move(spec)) {
     if (!step.carry.empty()) ids.carry = Id(mjOBJ_SITE, step.carry, field + ".carry");
     index_.expert_steps.push_back(ids);
   }
+  if (edit) edit(model_.get(), index_);
 }
 
 }  // namespace twinforge::sim

@@ -5,6 +5,7 @@
 
 #include <array>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -342,6 +343,10 @@ struct TaskIndex {
 class Task {
  public:
   explicit Task(TaskSpec spec);
+  // As above, then `edit` may change the compiled model's parameters (not its layout) before
+  // anything copies it: how the proxy reality applies its hidden physics.
+  using ModelEdit = std::function<void(mjModel*, const TaskIndex&)>;
+  Task(TaskSpec spec, const ModelEdit& edit);
 
   const TaskSpec& spec() const { return spec_; }
   const RobotSpec& robot() const { return robot_; }

@@ -1,0 +1,225 @@
+#include "reality/proxy_reality.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "core/config.h"
+#include "core/error.h"
+#include "core/log.h"
+
+namespace twinforge::reality {
+
+WorldSpec LoadWorldSpec(const std::filesystem::path& dir) {
+  const auto file = dir / "world.yaml";
+  if (!std::filesystem::is_regular_file(file))
+    throw core::ConfigError(file.string(), "", "no world.yaml in " + dir.string());
+  WorldSpec spec = core::LoadConfig<WorldSpec>(file);
+  spec.file = file;
+  return spec;
+}
+
+std::filesystem::path ResolveWorldDir(const std::string& name) {
+  if (std::filesystem::is_directory(name)) return name;
+  const auto builtin = std::filesystem::path(TWINFORGE_ASSETS_DIR) / "worlds" / name;
+  if (std::filesystem::is_directory(builtin)) return builtin;
+  throw core::ConfigError(name, "",
+                          "no world directory '" + name + "' (nor assets/worlds/" + name + ")");
+}
+
+// The proxy arm's own low-level controller: commands take effect after the latency, and the
+// target the joints servo to moves smoothly toward the command instead of jumping.
+class ProxyReality::Controller : public sim::Env::SubstepHook {
+ public:
+  Controller(const ControllerSpec& spec, const sim::RobotIndex& robot, double timestep)
+      : spec_(spec),
+        robot_(robot),
+        latency_substeps_(static_cast<int>(std::lround(spec.latency / timestep))) {}
+
+  void Reset(const mjData* d) {
+    for (int k = 0; k < sim::kArmDof; ++k) {
+      applied_[k] = d->qpos[robot_.arm_qpos[k]];
+      active_[k] = previous_[k] = applied_[k];
+    }
+    finger_ = previous_finger_ = d->ctrl[robot_.finger_actuator[0]];
+    substep_ = 0;
+  }
+  // A new command: remember the one still being followed until the latency has passed.
+  void Command(const sim::JointTargets& targets) {
+    previous_ = active_;
+    previous_finger_ = finger_;
+    active_ = targets.arm;
+    finger_ = targets.finger;
+    substep_ = 0;
+  }
+  void BeforeSubstep(const mjModel*, mjData* d) override {
+    const bool started = substep_++ >= latency_substeps_;
+    const sim::ArmVector& goal = started ? active_ : previous_;
+    applied_ += spec_.interpolation * (goal - applied_);
+    for (int k = 0; k < sim::kArmDof; ++k) d->ctrl[robot_.arm_actuator[k]] = applied_[k];
+    for (int k = 0; k < 2; ++k)
+      d->ctrl[robot_.finger_actuator[k]] = started ? finger_ : previous_finger_;
+  }
+
+ private:
+  ControllerSpec spec_;
+  sim::RobotIndex robot_;
+  int latency_substeps_;
+  sim::ArmVector applied_ = sim::ArmVector::Zero(), active_ = sim::ArmVector::Zero(),
+                 previous_ = sim::ArmVector::Zero();
+  double finger_ = 0, previous_finger_ = 0;
+  int substep_ = 0;
+};
+
+namespace {
+
+// The world's hidden controller and arm physics, written into its compiled model.
+sim::Task::ModelEdit HiddenRobotPhysics(const ControllerSpec& c) {
+  return [c](mjModel* m, const sim::TaskIndex& index) {
+    const auto& r = index.robot;
+    for (int k = 0; k < sim::kArmDof; ++k) {
+      const int a = r.arm_actuator[k];
+      m->actuator_gainprm[mjNGAIN * a] *= c.kp_scale;
+      m->actuator_biasprm[mjNBIAS * a + 1] *= c.kp_scale;
+      m->actuator_biasprm[mjNBIAS * a + 2] *= c.kd_scale;
+      m->dof_damping[r.arm_dof[k]] *= c.arm_damping_scale;
+      m->dof_frictionloss[r.arm_dof[k]] *= c.arm_frictionloss_scale;
+    }
+    for (int k = 0; k < 2; ++k) {
+      const int a = r.finger_actuator[k];
+      m->actuator_forcerange[2 * a] = -c.gripper_force;
+      m->actuator_forcerange[2 * a + 1] = c.gripper_force;
+    }
+  };
+}
+
+double Luminance(const float* rgba) {
+  return 0.2126 * rgba[0] + 0.7152 * rgba[1] + 0.0722 * rgba[2];
+}
+
+}  // namespace
+
+void ApplyDepthSensor(const DepthSensorSpec& sensor, const mjModel* m, int width, int height,
+                      const int* geom, std::vector<float>& depth, core::Rng& rng,
+                      std::vector<uint16_t>& depth_mm) {
+  const int n = width * height;
+  depth_mm.assign(n, 0);
+  auto at = [&](int u, int v) { return depth[v * width + u]; };
+  for (int v = 0; v < height; ++v)
+    for (int u = 0; u < width; ++u) {
+      const int i = v * width + u;
+      float z = depth[i];
+      if (z <= 0 || z > sensor.max_range) continue;
+      // Edges: a neighbour much nearer, much farther or missing.
+      bool edge = false;
+      for (const auto& [du, dv] : {std::pair{1, 0}, {-1, 0}, {0, 1}, {0, -1}}) {
+        const int uu = u + du, vv = v + dv;
+        if (uu < 0 || vv < 0 || uu >= width || vv >= height) continue;
+        const float zn = at(uu, vv);
+        edge = edge || zn <= 0 || std::abs(zn - z) > sensor.edge_jump;
+      }
+      // The rng is drawn the same number of times whatever the outcome, so a change in one
+      // pixel does not reshuffle the noise of all the others.
+      const double edge_draw = rng.Uniform(), surface_draw = rng.Uniform(), noise = rng.Normal();
+      if (edge && edge_draw < sensor.edge_dropout) continue;
+      if (geom && geom[i] >= 0) {
+        const int g = geom[i], mat = m->geom_matid[g];
+        const float* rgba = mat >= 0 ? m->mat_rgba + 4 * mat : m->geom_rgba + 4 * g;
+        const bool dark = Luminance(rgba) < sensor.dark_luminance;
+        const bool shiny = mat >= 0 && m->mat_specular[mat] >= sensor.shiny_specular;
+        if ((dark && surface_draw < sensor.dark_dropout) ||
+            (shiny && surface_draw < sensor.shiny_dropout))
+          continue;
+      }
+      z += static_cast<float>(noise * (sensor.sigma0 + sensor.sigma_z2 * z * z));
+      if (sensor.quantization > 0)
+        z = static_cast<float>(std::round(z / sensor.quantization) * sensor.quantization);
+      depth_mm[i] = static_cast<uint16_t>(std::clamp(std::lround(z * 1000.0), 0L, 65535L));
+    }
+}
+
+ProxyReality::ProxyReality(const std::filesystem::path& world_dir)
+    : spec_(LoadWorldSpec(world_dir)), noise_rng_(spec_.seed, 0x5e) {
+  sim::TaskSpec task_spec = sim::LoadTaskSpec((world_dir / spec_.task).string());
+  task_ =
+      std::make_shared<const sim::Task>(std::move(task_spec), HiddenRobotPhysics(spec_.controller));
+  env_ = std::make_unique<sim::Env>(task_);
+  controller_ = std::make_unique<Controller>(spec_.controller, task_->index().robot,
+                                             task_->spec().control.timestep);
+  reported_camera_ = sim::MakeCamera(task_->spec().camera);
+  sim::Camera truth = reported_camera_;
+  const core::Pose error{Eigen::Vector3d(spec_.camera_offset.data()),
+                         core::FromRollPitchYaw(spec_.camera_rotation[0], spec_.camera_rotation[1],
+                                                spec_.camera_rotation[2])};
+  truth.pose = reported_camera_.pose * error;
+  caster_ = std::make_unique<sim::RayCaster>(truth, env_->model());
+  const auto& k = truth.intrinsics;
+  depth_.resize(k.width * k.height);
+  geom_.resize(k.width * k.height);
+  Reset({spec_.seed, 1});
+}
+
+ProxyReality::~ProxyReality() = default;
+
+RobotInfo ProxyReality::Info() {
+  RobotInfo info;
+  info.name = "proxy:" + spec_.name;
+  info.robot = spec_.robot;
+  info.control_period = task_->spec().control.substeps * task_->spec().control.timestep;
+  info.cameras = {task_->spec().camera.name};
+  info.has_success_oracle = true;
+  return info;
+}
+
+RgbdFrame ProxyReality::Frame() {
+  RgbdFrame frame;
+  frame.camera = task_->spec().camera.name;
+  frame.stamp = clock_;
+  frame.intrinsics = reported_camera_.intrinsics;
+  frame.extrinsics = reported_camera_.pose;
+  const auto& k = frame.intrinsics;
+  frame.rgb.resize(std::size_t(k.width) * k.height * 3);
+  // A real camera sees the arm too; the pipeline removes it using forward kinematics.
+  caster_->Render(env_->model(), env_->data(), env_->base(), depth_.data(), frame.rgb.data(), true,
+                  geom_.data());
+  ApplyDepthSensor(spec_.depth, env_->model(), k.width, k.height, geom_.data(), depth_, noise_rng_,
+                   frame.depth);
+  return frame;
+}
+
+Observation ProxyReality::Observe(bool with_frames) {
+  Observation o;
+  o.stamp = clock_;
+  const auto& r = task_->index().robot;
+  const mjData* d = env_->data();
+  for (int k = 0; k < sim::kArmDof; ++k) {
+    o.q[k] = d->qpos[r.arm_qpos[k]];
+    o.qd[k] = d->qvel[r.arm_dof[k]];
+  }
+  o.gripper_width = d->qpos[r.finger_qpos[0]] + d->qpos[r.finger_qpos[1]];
+  o.ee = env_->EePose();
+  if (with_frames) o.frames.push_back(Frame());
+  return o;
+}
+
+void ProxyReality::SendTargets(const sim::JointTargets& targets) {
+  controller_->Command(targets);
+  const sim::StepResult result = env_->StepTargets(targets, controller_.get());
+  if (result.unstable) spdlog::warn("proxy reality: the physics went unstable and was reset");
+  clock_ += task_->spec().control.substeps * task_->spec().control.timestep;
+}
+
+Observation ProxyReality::Reset(const ResetRequest& request) {
+  if (request.level < 0 || request.level > 3)
+    throw core::ConfigError("reset", "level",
+                            "a level in 0..3, got " + std::to_string(request.level));
+  env_->Reset(request.seed, request.level);
+  controller_->Reset(env_->data());
+  noise_rng_ = core::Rng(core::MixSeed(spec_.seed, request.seed), 0x5e);
+  return Observe(true);
+}
+
+SuccessAnswer ProxyReality::QuerySuccess() {
+  return env_->Success() ? SuccessAnswer::kSuccess : SuccessAnswer::kFailure;
+}
+
+}  // namespace twinforge::reality

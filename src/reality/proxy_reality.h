@@ -1,0 +1,154 @@
+// The proxy reality: a hidden world that stands in for a real robot and scene.
+//
+// A world is a directory (docs/reality-world.md): `world.yaml` with the hidden settings below,
+// and a task file with its own detailed scene (meshes, its own masses, frictions and damping),
+// success predicates (the oracle) and randomization levels. Only `twinforge reality serve` and
+// graders open it; pipeline stages reach it through reality::Robot, over the bridge.
+//
+// What differs from a twin, on purpose: the scene's geometry and physical parameters (in the
+// world's MJCF), the arm's low-level controller (gains, a target interpolator, latency), the
+// camera's true mount (off its reported extrinsics) and a depth sensor with structured-light
+// noise, quantization, missing pixels at depth edges and holes on dark or shiny surfaces.
+#pragma once
+
+#include <array>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "reality/robot.h"
+#include "sim/env.h"
+
+namespace twinforge::reality {
+
+struct DepthSensorSpec {
+  double sigma0 = 0.001;         // m, noise at zero range
+  double sigma_z2 = 0.002;       // 1/m: noise grows with z^2
+  double quantization = 0.001;   // m, depth reported in steps of this
+  double edge_jump = 0.02;       // m, a neighbour this much farther or nearer marks an edge
+  double edge_dropout = 0.5;     // probability that an edge pixel returns nothing
+  double dark_luminance = 0.12;  // surfaces darker than this (0..1) may return nothing
+  double dark_dropout = 0.6;
+  double shiny_specular = 0.7;  // materials at least this specular may return nothing
+  double shiny_dropout = 0.5;
+  double max_range = 2.5;  // m
+  template <class A>
+  void Serialize(A& a) {
+    a("sigma0", sigma0);
+    a("sigma_z2", sigma_z2);
+    a("quantization", quantization);
+    a("edge_jump", edge_jump);
+    a("edge_dropout", edge_dropout);
+    a("dark_luminance", dark_luminance);
+    a("dark_dropout", dark_dropout);
+    a("shiny_specular", shiny_specular);
+    a("shiny_dropout", shiny_dropout);
+    a("max_range", max_range);
+    a.Require(sigma0 >= 0 && sigma_z2 >= 0, "sigma0", "non-negative noise");
+    a.Require(quantization >= 0, "quantization", "a non-negative step in m");
+    for (double p : {edge_dropout, dark_dropout, shiny_dropout})
+      a.Require(p >= 0 && p <= 1, "edge_dropout", "probabilities in [0, 1]");
+    a.Require(max_range > 0, "max_range", "a positive range in m");
+  }
+};
+
+// The arm's low-level controller, relative to the twin's position actuators.
+struct ControllerSpec {
+  double kp_scale = 0.75;          // arm actuator stiffness x this
+  double kd_scale = 1.4;           // arm actuator damping x this
+  double interpolation = 0.15;     // per physics step, the applied target moves this fraction of
+                                   // the way to the commanded one (1 = jumps at once)
+  double latency = 0.04;           // s before a new command starts to be followed
+  double arm_damping_scale = 1.5;  // joint damping x this
+  double arm_frictionloss_scale = 2.0;  // joint dry friction x this
+  double gripper_force = 45;            // N, the fingers' force limit
+  template <class A>
+  void Serialize(A& a) {
+    a("kp_scale", kp_scale);
+    a("kd_scale", kd_scale);
+    a("interpolation", interpolation);
+    a("latency", latency);
+    a("arm_damping_scale", arm_damping_scale);
+    a("arm_frictionloss_scale", arm_frictionloss_scale);
+    a("gripper_force", gripper_force);
+    a.Require(kp_scale > 0 && kd_scale > 0, "kp_scale", "positive gain scales");
+    a.Require(interpolation > 0 && interpolation <= 1, "interpolation", "a fraction in (0, 1]");
+    a.Require(latency >= 0 && latency < 1, "latency", "a delay in [0, 1) s");
+    a.Require(gripper_force > 0, "gripper_force", "a positive force in N");
+  }
+};
+
+struct WorldSpec {
+  std::string name;
+  std::string task = "task.yaml";  // the world's own task file (scene, oracle, randomization)
+  std::string robot = "panda";     // what the robot reports itself as (assets/robots/<robot>)
+  ControllerSpec controller;
+  DepthSensorSpec depth;
+  // The camera's true mount: its reported extrinsics composed with this error (camera frame).
+  std::array<double, 3> camera_offset{0, 0, 0};    // m
+  std::array<double, 3> camera_rotation{0, 0, 0};  // rad, roll/pitch/yaw
+  uint64_t seed = 1;                               // sensor noise stream
+
+  std::filesystem::path file;  // where it was loaded from (not serialized)
+  template <class A>
+  void Serialize(A& a) {
+    a("name", name);
+    a("task", task);
+    a("robot", robot);
+    a("controller", controller);
+    a("depth", depth);
+    a("camera_offset", camera_offset);
+    a("camera_rotation", camera_rotation);
+    a("seed", seed);
+    a.Require(!name.empty(), "name", "a world name");
+  }
+};
+
+// Loads `dir/world.yaml`. Throws ConfigError naming the file and field.
+WorldSpec LoadWorldSpec(const std::filesystem::path& dir);
+
+// The directory of a built-in world (assets/worlds/<name>) or `name` itself if it is a path.
+std::filesystem::path ResolveWorldDir(const std::string& name);
+
+// The proxy reality, in-process. Advances one control period per SendTargets (lockstep: the
+// world's clock only moves when the robot is told to do something).
+class ProxyReality : public Robot {
+ public:
+  explicit ProxyReality(const std::filesystem::path& world_dir);
+  ~ProxyReality() override;
+
+  RobotInfo Info() override;
+  Observation Observe(bool with_frames) override;
+  void SendTargets(const sim::JointTargets& targets) override;
+  Observation Reset(const ResetRequest& request) override;
+  SuccessAnswer QuerySuccess() override;
+
+  // Renders one frame as the sensor would report it (exposed for tests and scans).
+  RgbdFrame Frame();
+
+  const WorldSpec& spec() const { return spec_; }
+  // For graders and tests only: the hidden simulation.
+  const sim::Env& hidden_env() const { return *env_; }
+
+ private:
+  class Controller;
+  WorldSpec spec_;
+  std::shared_ptr<const sim::Task> task_;
+  std::unique_ptr<sim::Env> env_;
+  std::unique_ptr<Controller> controller_;
+  sim::Camera reported_camera_;
+  std::unique_ptr<sim::RayCaster> caster_;  // at the camera's true pose
+  core::Rng noise_rng_;
+  std::vector<float> depth_;
+  std::vector<int> geom_;
+  double clock_ = 0;
+};
+
+// Applies the depth sensor model to a rendered depth image (metres, 0 = none) in place, given
+// the geom seen at each pixel, and converts it to millimetres.
+void ApplyDepthSensor(const DepthSensorSpec& sensor, const mjModel* m, int width, int height,
+                      const int* geom, std::vector<float>& depth, core::Rng& rng,
+                      std::vector<uint16_t>& depth_mm);
+
+}  // namespace twinforge::reality

@@ -1,0 +1,135 @@
+#include "reality/proxy_reality.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "sim/expert.h"
+
+namespace twinforge::reality {
+namespace {
+
+const char* const kWorlds[] = {"open_drawer", "open_cabinet", "mug_on_shelf", "peg_insertion"};
+
+class World : public ::testing::TestWithParam<const char*> {};
+
+// The gap is real: the arm's controller and the scene's physics differ from the twin's nominal
+// values, and so does what the camera sees.
+TEST_P(World, PhysicsDifferFromTheTwin) {
+  ProxyReality proxy(ResolveWorldDir(GetParam()));
+  const sim::Task twin(sim::LoadTaskSpec(GetParam()));
+  const mjModel* real = proxy.hidden_env().model();
+  const mjModel* nominal = twin.model();
+  const auto& rr = proxy.hidden_env().task().index().robot;
+  const auto& rt = twin.index().robot;
+  for (int k = 0; k < sim::kArmDof; ++k) {
+    EXPECT_NE(real->actuator_gainprm[mjNGAIN * rr.arm_actuator[k]],
+              nominal->actuator_gainprm[mjNGAIN * rt.arm_actuator[k]]);
+    EXPECT_NE(real->dof_damping[rr.arm_dof[k]], nominal->dof_damping[rt.arm_dof[k]]);
+  }
+  // Every object body the task names weighs something else in the world.
+  const auto& objects = twin.spec().objects;
+  int differing = 0;
+  for (const auto& name : objects) {
+    const int a = mj_name2id(real, mjOBJ_BODY, name.c_str());
+    const int b = mj_name2id(nominal, mjOBJ_BODY, name.c_str());
+    ASSERT_GE(a, 0) << name;
+    ASSERT_GE(b, 0) << name;
+    double real_mass = 0, nominal_mass = 0;  // the body and everything it carries
+    for (int i = 0; i < real->nbody; ++i)
+      for (int p = i; p > 0; p = real->body_parentid[p])
+        if (p == a) real_mass += real->body_mass[i];
+    for (int i = 0; i < nominal->nbody; ++i)
+      for (int p = i; p > 0; p = nominal->body_parentid[p])
+        if (p == b) nominal_mass += nominal->body_mass[i];
+    differing += std::abs(real_mass - nominal_mass) > 0.05 * nominal_mass;
+  }
+  EXPECT_GT(differing, 0) << GetParam();
+}
+
+// The sensor is not the twin's ideal ray caster: noise, quantization and missing pixels.
+TEST_P(World, DepthSensorIsNoisyAndHasHoles) {
+  ProxyReality proxy(ResolveWorldDir(GetParam()));
+  proxy.Reset({3, 1});
+  const RgbdFrame frame = proxy.Frame();
+  const auto& k = frame.intrinsics;
+  ASSERT_EQ(frame.depth.size(), std::size_t(k.width) * k.height);
+  ASSERT_EQ(frame.rgb.size(), std::size_t(k.width) * k.height * 3);
+  // An ideal render at the *reported* camera pose of the same state.
+  sim::RayCaster ideal(sim::Camera{k, frame.extrinsics}, proxy.hidden_env().model());
+  std::vector<float> clean(k.width * k.height);
+  ideal.Render(proxy.hidden_env().model(), proxy.hidden_env().data(), proxy.hidden_env().base(),
+               clean.data(), nullptr, true);
+  int returns = 0, holes = 0, off = 0;
+  for (std::size_t i = 0; i < clean.size(); ++i) {
+    if (clean[i] <= 0) continue;
+    ++returns;
+    if (frame.depth[i] == 0) {
+      ++holes;
+      continue;
+    }
+    off += std::abs(frame.depth[i] * 1e-3 - clean[i]) > 1e-3;
+  }
+  ASSERT_GT(returns, 1000);
+  EXPECT_GT(holes, returns / 100) << "some pixels return nothing";
+  EXPECT_LT(holes, returns / 3) << "most pixels still return";
+  EXPECT_GT(off, returns / 4) << "depth is off the ideal (noise, camera mount error)";
+}
+
+// The world can be solved through the robot interface: the world's own scripted operator,
+// deciding from the hidden state, acting through ActionClient (safety filter + the twin's IK).
+TEST_P(World, SolvableThroughTheRobotInterface) {
+  ProxyReality proxy(ResolveWorldDir(GetParam()));
+  const sim::Task& task = proxy.hidden_env().task();
+  ActionClient client(proxy, task.spec().control.limits);
+  sim::ScriptedExpert expert(task);
+  int successes = 0;
+  const int episodes = 6;
+  for (int e = 0; e < episodes; ++e) {
+    Observation o = proxy.Reset({static_cast<uint64_t>(100 + e), 1});
+    client.ResetGripper();
+    expert.Reset();
+    core::Rng rng(e);
+    for (int t = 0; t < task.spec().horizon; ++t) {
+      client.Act(expert.Act(proxy.hidden_env(), rng), o);
+      o = proxy.Observe(false);
+      if (proxy.QuerySuccess() == SuccessAnswer::kSuccess) {
+        ++successes;
+        break;
+      }
+    }
+  }
+  // Harder than the twin (the expert there: >= 95%); 30 episodes gave 70-100% per world.
+  EXPECT_GE(successes, episodes - 2) << GetParam();
+}
+
+INSTANTIATE_TEST_SUITE_P(Worlds, World, ::testing::ValuesIn(kWorlds));
+
+TEST(DepthSensor, NoiseGrowsWithRangeAndQuantizes) {
+  DepthSensorSpec sensor;
+  sensor.edge_dropout = 0;
+  sensor.sigma0 = 0.0005;
+  sensor.sigma_z2 = 0.004;
+  sensor.quantization = 0.002;
+  const int w = 64, h = 64;
+  core::Rng rng(5);
+  auto spread = [&](float z) {
+    std::vector<float> depth(w * h, z);
+    std::vector<uint16_t> mm;
+    ApplyDepthSensor(sensor, nullptr, w, h, nullptr, depth, rng, mm);
+    double sum = 0, sum2 = 0;
+    for (uint16_t v : mm) {
+      EXPECT_EQ(v % 2, 0) << "2 mm steps";
+      sum += v * 1e-3;
+      sum2 += v * 1e-3 * v * 1e-3;
+    }
+    const double mean = sum / mm.size();
+    return std::sqrt(sum2 / mm.size() - mean * mean);
+  };
+  const double near = spread(0.5f), far = spread(1.5f);
+  EXPECT_GT(far, 3 * near);
+  EXPECT_NEAR(far, 0.0005 + 0.004 * 2.25, 0.002);
+}
+
+}  // namespace
+}  // namespace twinforge::reality
