@@ -35,13 +35,15 @@ TEST_P(World, PhysicsDifferFromTheTwin) {
     const int b = mj_name2id(nominal, mjOBJ_BODY, name.c_str());
     ASSERT_GE(a, 0) << name;
     ASSERT_GE(b, 0) << name;
-    double real_mass = 0, nominal_mass = 0;  // the body and everything it carries
-    for (int i = 0; i < real->nbody; ++i)
-      for (int p = i; p > 0; p = real->body_parentid[p])
-        if (p == a) real_mass += real->body_mass[i];
-    for (int i = 0; i < nominal->nbody; ++i)
-      for (int p = i; p > 0; p = nominal->body_parentid[p])
-        if (p == b) nominal_mass += nominal->body_mass[i];
+    // The body and everything it carries.
+    auto subtree_mass = [](const mjModel* m, int body) {
+      double mass = 0;
+      for (int i = 0; i < m->nbody; ++i)
+        for (int p = i; p > 0; p = m->body_parentid[p])
+          if (p == body) mass += m->body_mass[i];
+      return mass;
+    };
+    const double real_mass = subtree_mass(real, a), nominal_mass = subtree_mass(nominal, b);
     differing += std::abs(real_mass - nominal_mass) > 0.05 * nominal_mass;
   }
   EXPECT_GT(differing, 0) << GetParam();
