@@ -123,8 +123,7 @@ void ApplyDepthSensor(const DepthSensorSpec& sensor, const mjModel* m, int width
       if (edge && edge_draw < sensor.edge_dropout) continue;
       if (geom && geom[i] >= 0) {
         const int g = geom[i], mat = m->geom_matid[g];
-        const float* rgba = mat >= 0 ? m->mat_rgba + 4 * mat : m->geom_rgba + 4 * g;
-        const bool dark = Luminance(rgba) < sensor.dark_luminance;
+        const bool dark = Luminance(sim::GeomRgba(m, g)) < sensor.dark_luminance;
         const bool shiny = mat >= 0 && m->mat_specular[mat] >= sensor.shiny_specular;
         if ((dark && surface_draw < sensor.dark_dropout) ||
             (shiny && surface_draw < sensor.shiny_dropout))

@@ -132,8 +132,7 @@ void RayCaster::Render(const mjModel* m, const mjData* d, const core::Pose& base
       rgb[3 * i] = rgb[3 * i + 1] = rgb[3 * i + 2] = 0;
       continue;
     }
-    const int mat = m->geom_matid[hit.geom];
-    const float* color = mat >= 0 ? m->mat_rgba + 4 * mat : m->geom_rgba + 4 * hit.geom;
+    const float* color = GeomRgba(m, hit.geom);
     // Surfaces darkened with distance from the camera.
     const double shade = std::clamp(1.0 - 0.25 * (hit.distance - 0.5), 0.55, 1.0);
     for (int c = 0; c < 3; ++c)

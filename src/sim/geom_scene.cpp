@@ -162,9 +162,7 @@ void GeomScene::Update(const mjModel* m, const mjData* d, unsigned hidden_groups
   for (std::size_t i = 0; i < geom_of_instance_.size(); ++i) {
     const int g = geom_of_instance_[i];
     RTCGeometry instance = embree_->instances[i];
-    const int mat = m->geom_matid[g];
-    const float alpha = mat >= 0 ? m->mat_rgba[4 * mat + 3] : m->geom_rgba[4 * g + 3];
-    const bool enable = alpha > 0 && !((hidden_groups >> m->geom_group[g]) & 1u);
+    const bool enable = GeomRgba(m, g)[3] > 0 && !((hidden_groups >> m->geom_group[g]) & 1u);
     if (enable != static_cast<bool>(enabled_[i])) {
       enable ? rtcEnableGeometry(instance) : rtcDisableGeometry(instance);
       enabled_[i] = enable;

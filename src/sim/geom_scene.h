@@ -46,6 +46,12 @@ class GeomScene {
   std::vector<uint8_t> enabled_;
 };
 
+// The colour a geom shows: its material's if it has one, else its own (rgba, 4 floats).
+inline const float* GeomRgba(const mjModel* m, int g) {
+  const int mat = m->geom_matid[g];
+  return mat >= 0 ? m->mat_rgba + 4 * mat : m->geom_rgba + 4 * g;
+}
+
 // Triangles of one geom in its own frame: xyz per vertex, three vertex indices per triangle.
 struct TriangleMesh {
   std::vector<float> vertices;
