@@ -2,6 +2,7 @@
 #include <CLI/CLI.hpp>
 #include <iostream>
 
+#include "app/data_commands.h"
 #include "app/doctor.h"
 #include "app/reality_commands.h"
 #include "app/sim_commands.h"
@@ -17,13 +18,16 @@ int main(int argc, char** argv) {
   CLI::App app{"twinforge: real scene -> digital twin -> robust policy -> real robot"};
   app.require_subcommand(1);
   std::string log_level = "info";
-  app.add_option("--log-level", log_level, "trace, debug, info, warn, error, critical, off");
+  app.add_option("--log-level", log_level, "trace, debug, info, warn, error, critical, off")
+      ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "critical", "off"}))
+      ->each([](const std::string& level) { core::SetupLogging(level); });
 
   auto* doctor = app.add_subcommand("doctor", "check dependencies, BLAS and threads");
   int exit_code = 0;
   doctor->callback([&] { exit_code = app::RunDoctor(std::cout); });
   app::AddSimCommands(app, exit_code);
   app::AddRealityCommands(app, exit_code);
+  app::AddDataCommands(app, exit_code);
 
   try {
     app.parse(argc, argv);

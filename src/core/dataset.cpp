@@ -359,6 +359,7 @@ std::string DatasetWriter::Add(const Episode& episode, Split split) {
       WriteDataset(ctx, obs.get(), key, value.shape, H5T_NATIVE_UINT8, H5T_STD_U8LE,
                    value.data.data(), true);
     WriteInt64Attribute(ctx, g, "num_samples", static_cast<int64_t>(t));
+    if (!episode.meta.empty()) WriteStringAttribute(ctx, g, "meta", episode.meta.dump());
   }
   // The episode becomes visible under its final name only once complete.
   if (H5Lmove(data.get(), partial.c_str(), data.get(), name.c_str(), H5P_DEFAULT, H5P_DEFAULT) < 0)
@@ -414,6 +415,10 @@ Episode DatasetReader::Read(const std::string& demo) const {
   if (LinkExists(g, "rewards"))
     e.rewards = ReadArray<float>(at, g, "rewards", H5T_NATIVE_FLOAT).data;
   if (LinkExists(g, "dones")) e.dones = ReadArray<uint8_t>(at, g, "dones", H5T_NATIVE_UINT8).data;
+  if (H5Aexists(g, "meta") > 0) {
+    e.meta = nlohmann::json::parse(ReadStringAttribute(at, g, "meta"), nullptr, false);
+    if (e.meta.is_discarded()) at.Fail("attrs[meta]", "not valid JSON");
+  }
   if (LinkExists(g, "obs")) {
     Handle obs = Handle(H5Gopen2(g, "obs", H5P_DEFAULT), H5Gclose);
     for (const auto& key : ChildNames(obs.get())) {

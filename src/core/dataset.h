@@ -1,7 +1,7 @@
 // Demonstration datasets in robomimic's HDF5 layout.
 //
 //   data/                      attrs: total (int64), env_args (JSON string)
-//     demo_0/                  attrs: num_samples (int64)
+//     demo_0/                  attrs: num_samples (int64), meta (JSON string: seed, level...)
 //       actions  [T, A]        rewards [T]   dones [T]   states [T, S]
 //       obs/<key> [T, ...]     float vectors, or uint8 images [T, H, W, C]
 //   mask/train, mask/valid     demo names (fixed-length byte strings)
@@ -45,12 +45,13 @@ using FloatArray = Array<float>;
 using ByteArray = Array<uint8_t>;
 
 struct Episode {
-  FloatArray actions;                       // [T, action_dim]
-  FloatArray states;                        // [T, state_dim]; may be empty
-  std::vector<float> rewards;               // [T]
-  std::vector<uint8_t> dones;               // [T]
-  std::map<std::string, FloatArray> obs;    // [T, ...] numeric observations
-  std::map<std::string, ByteArray> images;  // [T, H, W, C] uint8 observations
+  FloatArray actions;                              // [T, action_dim]
+  FloatArray states;                               // [T, state_dim]; may be empty
+  std::vector<float> rewards;                      // [T]
+  std::vector<uint8_t> dones;                      // [T]
+  std::map<std::string, FloatArray> obs;           // [T, ...] numeric observations
+  std::map<std::string, ByteArray> images;         // [T, H, W, C] uint8 observations
+  nlohmann::json meta = nlohmann::json::object();  // what started the episode (seed, level...)
   std::size_t length() const { return actions.rows(); }
 };
 

@@ -33,6 +33,7 @@ Episode MakeEpisode(std::size_t t, float base) {
   e.rewards.back() = 1.0f;
   e.dones.assign(t, 0);
   e.dones.back() = 1;
+  e.meta = {{"seed", 1000 + t}, {"level", 2}};
   return e;
 }
 
@@ -42,6 +43,7 @@ void ExpectSameEpisode(const Episode& a, const Episode& b) {
   EXPECT_EQ(a.states.data, b.states.data);
   EXPECT_EQ(a.rewards, b.rewards);
   EXPECT_EQ(a.dones, b.dones);
+  EXPECT_EQ(a.meta, b.meta);
   ASSERT_EQ(a.obs.size(), b.obs.size());
   for (const auto& [k, v] : a.obs) {
     EXPECT_EQ(v.shape, b.obs.at(k).shape) << k;

@@ -172,6 +172,47 @@ sim::JointTargets DecodeTargets(const json& j) {
   return t;
 }
 
+json EncodeOperatorInput(const OperatorInput& in) {
+  json j = {{"kind", ToString(in.kind)}, {"think", in.think}};
+  if (in.kind == OperatorInput::Kind::kAction) {
+    if (in.action.mode == sim::ActionMode::kDiscrete)
+      j["action"] = {{"discrete", in.action.index}};
+    else
+      j["action"] = {{"continuous", in.action.value}};
+  }
+  return j;
+}
+
+OperatorInput DecodeOperatorInput(const json& j) {
+  OperatorInput in;
+  const std::string kind = String(j, "kind");
+  in.think = j.value("think", 0.0);
+  if (kind == "idle")
+    in.kind = OperatorInput::Kind::kIdle;
+  else if (kind == "done")
+    in.kind = OperatorInput::Kind::kDone;
+  else if (kind == "quit")
+    in.kind = OperatorInput::Kind::kQuit;
+  else if (kind == "action")
+    in.kind = OperatorInput::Kind::kAction;
+  else
+    throw BridgeError("operator input kind '" + kind + "' is not action/idle/done/quit");
+  if (in.kind != OperatorInput::Kind::kAction) return in;
+  const json& a = Field(j, "action");
+  if (a.contains("discrete")) {
+    in.action = sim::Action::Discrete(Number<int>(a, "discrete"));
+    if (in.action.index < 0 || in.action.index >= sim::kDiscreteActions)
+      throw BridgeError("discrete action " + std::to_string(in.action.index) + " is not in 0..13");
+  } else {
+    const auto v = Vector<sim::kContinuousActionDim>(a, "continuous");
+    if (!v.allFinite()) throw BridgeError("continuous action is not finite");
+    std::array<double, sim::kContinuousActionDim> value{};
+    std::copy(v.data(), v.data() + sim::kContinuousActionDim, value.begin());
+    in.action = sim::Action::Continuous(value);
+  }
+  return in;
+}
+
 // ---------------------------------------------------------------------------------------------
 
 struct BridgeServer::Zmq {
@@ -217,7 +258,9 @@ json BridgeServer::Handle(const json& request) {
                    {"robot", info.robot},
                    {"control_period", info.control_period},
                    {"cameras", info.cameras},
-                   {"has_success_oracle", info.has_success_oracle}}}});
+                   {"has_success_oracle", info.has_success_oracle},
+                   {"can_scan", info.can_scan},
+                   {"has_operator", info.has_operator}}}});
     }
     if (op == "observe") {
       const bool frames = request.value("frames", true);
@@ -234,7 +277,17 @@ json BridgeServer::Handle(const json& request) {
       return Ok({{"observation", EncodeObservation(robot_.Reset(r))}});
     }
     if (op == "success") return Ok({{"success", ToString(robot_.QuerySuccess())}});
-    throw BridgeError("unknown op '" + op + "' (hello, observe, act, reset, success)");
+    if (op == "capture") {
+      CaptureRequest r;
+      r.pose = DecodePose(Field(request, "pose"));
+      const json& k = Field(request, "intrinsics");
+      r.intrinsics = {Number<int>(k, "width"), Number<int>(k, "height"), Number<double>(k, "fx"),
+                      Number<double>(k, "fy"), Number<double>(k, "cx"),  Number<double>(k, "cy")};
+      return Ok({{"frame", EncodeFrame(robot_.Capture(r))}});
+    }
+    if (op == "operator") return Ok({{"input", EncodeOperatorInput(robot_.AskOperator())}});
+    throw BridgeError("unknown op '" + op +
+                      "' (hello, observe, act, reset, success, capture, operator)");
   } catch (const std::exception& e) {
     return {{"ok", false}, {"error", e.what()}};
   }
@@ -345,6 +398,8 @@ RobotInfo BridgeClient::Info() {
   for (const auto& c : Field(j, "cameras"))
     info.cameras.push_back(c.is_string() ? c.get<std::string>() : "?");
   info.has_success_oracle = j.value("has_success_oracle", false);
+  info.can_scan = j.value("can_scan", false);
+  info.has_operator = j.value("has_operator", false);
   info_ = info;
   return info;
 }
@@ -368,6 +423,24 @@ SuccessAnswer BridgeClient::QuerySuccess() {
   if (s == "success") return SuccessAnswer::kSuccess;
   if (s == "failure") return SuccessAnswer::kFailure;
   return SuccessAnswer::kUnknown;
+}
+
+RgbdFrame BridgeClient::Capture(const CaptureRequest& request) {
+  const auto& k = request.intrinsics;
+  return DecodeFrame(Field(Call({{"op", "capture"},
+                                 {"pose", EncodePose(request.pose)},
+                                 {"intrinsics",
+                                  {{"width", k.width},
+                                   {"height", k.height},
+                                   {"fx", k.fx},
+                                   {"fy", k.fy},
+                                   {"cx", k.cx},
+                                   {"cy", k.cy}}}}),
+                           "frame"));
+}
+
+OperatorInput BridgeClient::AskOperator() {
+  return DecodeOperatorInput(Field(Call({{"op", "operator"}}), "input"));
 }
 
 }  // namespace twinforge::reality

@@ -31,6 +31,8 @@ nlohmann::json EncodeObservation(const Observation& o);
 Observation DecodeObservation(const nlohmann::json& j);
 nlohmann::json EncodeTargets(const sim::JointTargets& t);
 sim::JointTargets DecodeTargets(const nlohmann::json& j);
+nlohmann::json EncodeOperatorInput(const OperatorInput& in);
+OperatorInput DecodeOperatorInput(const nlohmann::json& j);
 
 struct ServeOptions {
   std::string bind = "127.0.0.1";
@@ -78,6 +80,8 @@ class BridgeClient : public Robot {
   void SendTargets(const sim::JointTargets& targets) override;
   Observation Reset(const ResetRequest& request) override;
   SuccessAnswer QuerySuccess() override;
+  RgbdFrame Capture(const CaptureRequest& request) override;
+  OperatorInput AskOperator() override;
 
  private:
   nlohmann::json Call(nlohmann::json request);

@@ -7,38 +7,17 @@
 #include <zmq.hpp>
 
 #include "reality/proxy_reality.h"
+#include "reality/scan.h"
+#include "reality/test_support.h"
 
 namespace twinforge::reality {
 namespace {
 
 using namespace std::chrono_literals;
 
-// A port of this test process's own (ctest runs test processes side by side).
-int TestPort(int k) { return 20000 + (::getpid() * 7 + k * 131) % 20000; }
-
-// A proxy world served on loopback from a thread, for as long as the object lives.
-class Served {
- public:
-  explicit Served(int port, std::string token = "")
-      : proxy_(ResolveWorldDir("open_drawer")),
-        server_(proxy_, {.bind = "127.0.0.1", .port = port, .token = std::move(token)}),
-        thread_([this] { server_.Run(stop_); }) {}
-  ~Served() {
-    stop_ = true;
-    thread_.join();
-  }
-  ProxyReality& proxy() { return proxy_; }
-
- private:
-  ProxyReality proxy_;
-  BridgeServer server_;
-  std::atomic<bool> stop_{false};
-  std::thread thread_;
-};
-
-ClientOptions Client(int port, std::chrono::milliseconds timeout = 5000ms) {
-  return {.address = "tcp://127.0.0.1:" + std::to_string(port), .timeout = timeout};
-}
+using testing::Client;
+using testing::Served;
+using testing::TestPort;
 
 TEST(Bridge, ObservationSurvivesTheWireEncoding) {
   ProxyReality proxy(ResolveWorldDir("open_drawer"));
@@ -83,6 +62,43 @@ TEST(Bridge, EveryMessageRoundTrips) {
   EXPECT_GT(o.ee.translation.z() - start.ee.translation.z(), 0.045);
   EXPECT_GT(o.stamp, start.stamp);
   EXPECT_EQ(client.QuerySuccess(), SuccessAnswer::kFailure);
+
+  // A scan frame from a requested pose, at requested intrinsics.
+  EXPECT_TRUE(info.can_scan);
+  ScanOptions scan;
+  scan.width = 64;
+  scan.height = 48;
+  const core::Pose pose = start.frames[0].extrinsics;
+  const RgbdFrame frame = client.Capture({pose, ScanIntrinsics(scan)});
+  EXPECT_EQ(frame.intrinsics.width, 64);
+  EXPECT_LT((frame.extrinsics.translation - pose.translation).norm(), 1e-12);
+  ASSERT_EQ(frame.depth.size(), 64u * 48u);
+  EXPECT_GT(std::count_if(frame.depth.begin(), frame.depth.end(), [](uint16_t d) { return d > 0; }),
+            64 * 48 / 2);
+
+  // The world's own operator presses a key.
+  EXPECT_TRUE(info.has_operator);
+  const OperatorInput in = client.AskOperator();
+  EXPECT_EQ(in.kind, OperatorInput::Kind::kAction);
+  EXPECT_GT(in.think, 0);
+}
+
+TEST(Bridge, OperatorInputSurvivesTheWireEncoding) {
+  OperatorInput in;
+  in.kind = OperatorInput::Kind::kAction;
+  in.action = sim::Action::Continuous({0.01, -0.02, 0.003, 0.1, -0.1, 0.05, 1});
+  in.think = 1.25;
+  const auto wire = nlohmann::json::to_msgpack(EncodeOperatorInput(in));
+  const OperatorInput back = DecodeOperatorInput(nlohmann::json::from_msgpack(wire));
+  EXPECT_EQ(back.kind, in.kind);
+  EXPECT_EQ(back.action.mode, sim::ActionMode::kContinuous);
+  EXPECT_EQ(back.action.value, in.action.value);
+  EXPECT_EQ(back.think, 1.25);
+  in.action = sim::Action::Discrete(13);
+  EXPECT_EQ(DecodeOperatorInput(EncodeOperatorInput(in)).action.index, 13);
+  EXPECT_THROW(DecodeOperatorInput({{"kind", "action"}, {"action", {{"discrete", 14}}}}),
+               BridgeError);
+  EXPECT_THROW(DecodeOperatorInput({{"kind", "dance"}}), BridgeError);
 }
 
 // A killed server: the client gets an error naming the address within its timeout, and talks

@@ -144,6 +144,7 @@ ProxyReality::ProxyReality(const std::filesystem::path& world_dir)
   env_ = std::make_unique<sim::Env>(task_);
   controller_ = std::make_unique<Controller>(spec_.controller, task_->index().robot,
                                              task_->spec().control.timestep);
+  operator_ = std::make_unique<ScriptedOperator>(*task_, spec_.operator_style);
   reported_camera_ = sim::MakeCamera(task_->spec().camera);
   sim::Camera truth = reported_camera_;
   const core::Pose error{Eigen::Vector3d(spec_.camera_offset.data()),
@@ -166,6 +167,8 @@ RobotInfo ProxyReality::Info() {
   info.control_period = task_->spec().control.substeps * task_->spec().control.timestep;
   info.cameras = {task_->spec().camera.name};
   info.has_success_oracle = true;
+  info.can_scan = true;
+  info.has_operator = true;
   return info;
 }
 
@@ -184,6 +187,48 @@ RgbdFrame ProxyReality::Frame() {
                    frame.depth);
   return frame;
 }
+
+RgbdFrame ProxyReality::Capture(const CaptureRequest& request) {
+  const auto& k = request.intrinsics;
+  if (k.width <= 0 || k.height <= 0 || k.width > 4096 || k.height > 4096 || !(k.fx > 0) ||
+      !(k.fy > 0) || !std::isfinite(k.cx) || !std::isfinite(k.cy))
+    throw core::ConfigError("capture", "intrinsics",
+                            "width and height in 1..4096 and positive focal lengths, got " +
+                                std::to_string(k.width) + "x" + std::to_string(k.height));
+  if (!request.pose.translation.allFinite() || !request.pose.rotation.coeffs().allFinite())
+    throw core::NumericError("capture: the requested camera pose is not finite");
+  const auto same = [](const sim::CameraIntrinsics& a, const sim::CameraIntrinsics& b) {
+    return a.width == b.width && a.height == b.height && a.fx == b.fx && a.fy == b.fy &&
+           a.cx == b.cx && a.cy == b.cy;
+  };
+  if (!scan_caster_ || !same(scan_caster_->camera().intrinsics, k))
+    scan_caster_ = std::make_unique<sim::RayCaster>(sim::Camera{k, request.pose}, env_->model());
+  // Drawn one at a time: the order of arguments in one call is unspecified.
+  double draw[6];
+  for (double& v : draw) v = scan_rng_.Normal();
+  const auto& e = spec_.scan;
+  const core::Pose error{
+      Eigen::Vector3d(draw[0], draw[1], draw[2]) * e.position_sigma,
+      core::FromRollPitchYaw(e.rotation_sigma * draw[3], e.rotation_sigma * draw[4],
+                             e.rotation_sigma * draw[5])};
+  scan_caster_->set_pose(request.pose * error);
+  RgbdFrame frame;
+  frame.camera = "scan";
+  frame.stamp = clock_;
+  frame.intrinsics = k;
+  frame.extrinsics = request.pose;
+  const std::size_t n = std::size_t(k.width) * k.height;
+  frame.rgb.resize(n * 3);
+  std::vector<float> depth(n);
+  std::vector<int> geom(n);
+  scan_caster_->Render(env_->model(), env_->data(), env_->base(), depth.data(), frame.rgb.data(),
+                       true, geom.data());
+  ApplyDepthSensor(spec_.depth, env_->model(), k.width, k.height, geom.data(), depth, scan_rng_,
+                   frame.depth);
+  return frame;
+}
+
+OperatorInput ProxyReality::AskOperator() { return operator_->Next(*env_); }
 
 Observation ProxyReality::Observe(bool with_frames) {
   Observation o;
@@ -214,6 +259,8 @@ Observation ProxyReality::Reset(const ResetRequest& request) {
   env_->Reset(request.seed, request.level);
   controller_->Reset(env_->data());
   noise_rng_ = core::Rng(core::MixSeed(spec_.seed, request.seed), 0x5e);
+  scan_rng_ = core::Rng(core::MixSeed(spec_.seed, request.seed), 0x5ca);
+  operator_->Reset(core::MixSeed(spec_.seed, request.seed));
   return Observe(true);
 }
 

@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "reality/robot.h"
+#include "reality/teleop.h"
 #include "sim/env.h"
 
 namespace twinforge::reality {
@@ -79,6 +80,18 @@ struct ControllerSpec {
   }
 };
 
+// Where the scan camera really is, against where the robot says it put it (per frame, random).
+struct ScanCameraSpec {
+  double position_sigma = 0.002;  // m
+  double rotation_sigma = 0.003;  // rad
+  template <class A>
+  void Serialize(A& a) {
+    a("position_sigma", position_sigma);
+    a("rotation_sigma", rotation_sigma);
+    a.Require(position_sigma >= 0 && rotation_sigma >= 0, "position_sigma", "non-negative errors");
+  }
+};
+
 struct WorldSpec {
   std::string name;
   std::string task = "task.yaml";  // the world's own task file (scene, oracle, randomization)
@@ -89,6 +102,8 @@ struct WorldSpec {
   std::array<double, 3> camera_offset{0, 0, 0};    // m
   std::array<double, 3> camera_rotation{0, 0, 0};  // rad, roll/pitch/yaw
   uint64_t seed = 1;                               // sensor noise stream
+  ScanCameraSpec scan;
+  OperatorStyle operator_style;  // how the world's scripted operator types
 
   std::filesystem::path file;  // where it was loaded from (not serialized)
   template <class A>
@@ -101,6 +116,8 @@ struct WorldSpec {
     a("camera_offset", camera_offset);
     a("camera_rotation", camera_rotation);
     a("seed", seed);
+    a("scan", scan);
+    a("operator", operator_style);
     a.Require(!name.empty(), "name", "a world name");
   }
 };
@@ -123,6 +140,10 @@ class ProxyReality : public Robot {
   void SendTargets(const sim::JointTargets& targets) override;
   Observation Reset(const ResetRequest& request) override;
   SuccessAnswer QuerySuccess() override;
+  // Renders the scene from the requested pose, off by the arm's positioning error.
+  RgbdFrame Capture(const CaptureRequest& request) override;
+  // The world's scripted operator, watching the hidden scene.
+  OperatorInput AskOperator() override;
 
   // Renders one frame as the sensor would report it (exposed for tests and scans).
   RgbdFrame Frame();
@@ -138,10 +159,13 @@ class ProxyReality : public Robot {
   std::unique_ptr<sim::Env> env_;
   std::unique_ptr<Controller> controller_;
   sim::Camera reported_camera_;
-  std::unique_ptr<sim::RayCaster> caster_;  // at the camera's true pose
+  std::unique_ptr<sim::RayCaster> caster_;       // at the camera's true pose
+  std::unique_ptr<sim::RayCaster> scan_caster_;  // the scan camera, built for its intrinsics
+  std::unique_ptr<ScriptedOperator> operator_;
   core::Rng noise_rng_;
   std::vector<float> depth_;
   std::vector<int> geom_;
+  core::Rng scan_rng_;
   double clock_ = 0;
 };
 

@@ -16,6 +16,31 @@ const char* ToString(SuccessAnswer answer) {
   return "unknown";
 }
 
+const char* ToString(OperatorInput::Kind kind) {
+  switch (kind) {
+    case OperatorInput::Kind::kAction:
+      return "action";
+    case OperatorInput::Kind::kIdle:
+      return "idle";
+    case OperatorInput::Kind::kDone:
+      return "done";
+    case OperatorInput::Kind::kQuit:
+      return "quit";
+  }
+  return "idle";
+}
+
+RgbdFrame Robot::Capture(const CaptureRequest&) {
+  throw core::Error(Info().name +
+                    " cannot take scan frames (it has no camera it can move); capture the scan "
+                    "with a hand-held camera and write the frames in the layout of docs/scan.md");
+}
+
+OperatorInput Robot::AskOperator() {
+  throw core::Error(Info().name +
+                    " has no operator of its own; record demos with --operator keyboard");
+}
+
 std::filesystem::path RobotDescriptionPath(const std::string& name) {
   const auto path = std::filesystem::path(TWINFORGE_ASSETS_DIR) / "robots" / name / "robot.yaml";
   if (!std::filesystem::is_regular_file(path))

@@ -45,7 +45,26 @@ struct RobotInfo {
   double control_period = 0.1;  // s between actions
   std::vector<std::string> cameras;
   bool has_success_oracle = false;  // only the proxy reality can tell success by itself
+  bool can_scan = false;            // answers Capture (a wrist or scan camera it can move)
+  bool has_operator = false;        // answers AskOperator (the proxy's scripted operator)
 };
+
+// A scan frame: the scan camera brought to `pose` (camera, OpenCV axes -> robot base) and one
+// frame taken with `intrinsics`. A real robot moves its wrist camera there; the frame's
+// extrinsics are where the robot believes the camera ended up, which is not exactly where it is.
+struct CaptureRequest {
+  core::Pose pose;
+  sim::CameraIntrinsics intrinsics;
+};
+
+// What the person at the controls does next.
+struct OperatorInput {
+  enum class Kind { kAction, kIdle, kDone, kQuit };
+  Kind kind = Kind::kIdle;  // a key for a move or the gripper; nothing; "it's done"; stop recording
+  sim::Action action;       // when kind == kAction
+  double think = 0;         // s the person took to decide (hesitations included)
+};
+const char* ToString(OperatorInput::Kind kind);
 
 enum class SuccessAnswer { kSuccess, kFailure, kUnknown };
 const char* ToString(SuccessAnswer answer);
@@ -68,6 +87,11 @@ class Robot {
   virtual void SendTargets(const sim::JointTargets& targets) = 0;
   virtual Observation Reset(const ResetRequest& request) = 0;
   virtual SuccessAnswer QuerySuccess() = 0;
+  // One scan frame (Info().can_scan). The default says the robot cannot scan.
+  virtual RgbdFrame Capture(const CaptureRequest& request);
+  // The next input of the robot's own operator (Info().has_operator): the proxy reality's
+  // scripted operator, who watches the scene. The default says there is none.
+  virtual OperatorInput AskOperator();
 };
 
 // Drives a Robot with policy actions: keeps the gripper latch, runs the safety filter, turns the

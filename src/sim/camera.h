@@ -63,6 +63,8 @@ class RayCaster {
   void Render(const mjModel* m, const mjData* d, const core::Pose& base, float* depth, uint8_t* rgb,
               bool include_robot = false, int* geom = nullptr);
   const Camera& camera() const { return camera_; }
+  // Moves the camera (same intrinsics): a scan camera, or a pose being calibrated.
+  void set_pose(const core::Pose& pose) { camera_.pose = pose; }
   GeomScene& scene() { return scene_; }
 
  private:

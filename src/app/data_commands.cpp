@@ -1,0 +1,174 @@
+#include "app/data_commands.h"
+
+#include <unistd.h>
+
+#include <iostream>
+#include <memory>
+#include <nlohmann/json.hpp>
+
+#include "core/dataset.h"
+#include "core/log.h"
+#include "reality/connect.h"
+#include "reality/demos.h"
+#include "reality/scan.h"
+#include "reality/teleop.h"
+
+namespace twinforge::app {
+
+namespace {
+
+struct RealityCli {
+  std::string address = "proxy:open_drawer";
+  std::string token;
+  int timeout_ms = 10000;
+  void Add(CLI::App* command) {
+    command->add_option("--reality", address,
+                        "tcp://host:port of a robot (bridge protocol), or proxy:WORLD to start a "
+                        "proxy-reality world");
+    command->add_option("--token", token, "shared secret, if the robot wants one");
+    command->add_option("--timeout-ms", timeout_ms, "per-request timeout");
+  }
+  reality::ConnectOptions Options() const {
+    return {.address = address, .token = token, .timeout = std::chrono::milliseconds(timeout_ms)};
+  }
+};
+
+struct RecordCli {
+  RealityCli reality;
+  std::string task = "open_drawer";
+  std::string out;
+  std::string op = "auto";
+  reality::RecordOptions record;
+};
+
+struct ReplayCli {
+  RealityCli reality;
+  std::string task = "open_drawer";
+  std::string demos;
+};
+
+struct ScanCli {
+  RealityCli reality;
+  std::string task = "open_drawer";
+  std::string out;
+  reality::ScanOptions scan;
+};
+
+}  // namespace
+
+void AddDataCommands(CLI::App& parent, int& exit_code) {
+  auto* demos = parent.add_subcommand("demos", "record and replay demonstrations on a robot");
+  demos->require_subcommand(1);
+
+  auto record_cli = std::make_shared<RecordCli>();
+  auto* record = demos->add_subcommand(
+      "record", "teleoperate the robot and save successful demos (robomimic HDF5)");
+  record_cli->reality.Add(record);
+  record->add_option("--task", record_cli->task, "task (built-in name or task.yaml)");
+  record->add_option("--n", record_cli->record.demos, "successful demos to keep")
+      ->check(CLI::PositiveNumber);
+  record->add_option("--out", record_cli->out, "HDF5 file to create")->required();
+  record->add_option("--level", record_cli->record.level, "reset level asked of the robot")
+      ->check(CLI::Range(0, 3));
+  record->add_option("--seed", record_cli->record.seed, "seed of the reset requests");
+  record->add_option("--max-attempts", record_cli->record.max_attempts,
+                     "give up after this many demos (default 3 x --n)");
+  record
+      ->add_option("--operator", record_cli->op,
+                   "auto (the robot's own operator if it has one, else keyboard), scripted, "
+                   "keyboard")
+      ->check(CLI::IsMember({"auto", "scripted", "keyboard"}));
+  record
+      ->add_option("--scene-points", record_cli->record.cloud.scene_points, "scene points per step")
+      ->check(CLI::PositiveNumber);
+  record->add_option("--arm-points", record_cli->record.cloud.arm_points, "arm points per step")
+      ->check(CLI::PositiveNumber);
+  record->add_flag("--append", record_cli->record.append, "add to an existing file");
+  record->callback([record_cli, &exit_code] {
+    auto& o = *record_cli;
+    const sim::TaskSpec task = sim::LoadTaskSpec(o.task);
+    reality::RealityConnection connection(o.reality.Options());
+    reality::Robot& robot = connection.robot();
+    std::unique_ptr<reality::Operator> op;
+    const bool scripted = o.op == "scripted" || (o.op == "auto" && robot.Info().has_operator);
+    if (scripted)
+      op = std::make_unique<reality::RobotOperator>(robot);
+    else
+      op = std::make_unique<reality::KeyboardOperator>(STDIN_FILENO, stderr, task.control.action,
+                                                       task.control.limits);
+    spdlog::info("demos: recording {} demos of {} on {} with the {}", o.record.demos, task.name,
+                 robot.Info().name, op->name());
+    core::Progress progress("demos", o.record.demos, "demos");
+    const auto report = reality::RecordDemos(robot, *op, task, o.record, o.out, &progress);
+    progress.Finish();
+    std::cout << nlohmann::json{{"out", o.out},
+                                {"kept", report.kept},
+                                {"attempts", report.attempts},
+                                {"steps", report.steps},
+                                {"operator_minutes", report.operator_seconds / 60},
+                                {"wall_seconds", report.wall_seconds}}
+                     .dump(2)
+              << "\n";
+    exit_code = report.kept == o.record.demos ? 0 : 1;
+  });
+
+  auto replay_cli = std::make_shared<ReplayCli>();
+  auto* replay = demos->add_subcommand(
+      "replay", "send recorded demos' actions again from their recorded resets (JSON report)");
+  replay_cli->reality.Add(replay);
+  replay->add_option("--task", replay_cli->task, "task (built-in name or task.yaml)");
+  replay->add_option("--demos", replay_cli->demos, "HDF5 file of demos")->required();
+  replay->callback([replay_cli, &exit_code] {
+    auto& o = *replay_cli;
+    const sim::TaskSpec task = sim::LoadTaskSpec(o.task);
+    const core::DatasetReader reader(o.demos);
+    reality::RealityConnection connection(o.reality.Options());
+    nlohmann::json results = nlohmann::json::object();
+    int successes = 0;
+    for (const auto& name : reader.demos()) {
+      const auto answer = reality::ReplayDemo(connection.robot(), task, reader.Read(name));
+      results[name] = reality::ToString(answer);
+      successes += answer == reality::SuccessAnswer::kSuccess;
+    }
+    std::cout << nlohmann::json{{"demos", reader.demos().size()},
+                                {"successes", successes},
+                                {"results", results}}
+                     .dump(2)
+              << "\n";
+    exit_code = successes == static_cast<int>(reader.demos().size()) ? 0 : 1;
+  });
+
+  auto* scan = parent.add_subcommand("scan", "RGB-D scans of the scene through the robot");
+  scan->require_subcommand(1);
+  auto scan_cli = std::make_shared<ScanCli>();
+  auto* capture = scan->add_subcommand(
+      "capture", "move the scan camera around the scene and save RGB-D frames (docs/scan.md)");
+  scan_cli->reality.Add(capture);
+  capture->add_option("--task", scan_cli->task, "task whose scene to scan (sets the centre)");
+  capture->add_option("--out", scan_cli->out, "directory to write")->required();
+  capture->add_option("--width", scan_cli->scan.width, "image width")->check(CLI::Range(16, 4096));
+  capture->add_option("--height", scan_cli->scan.height, "image height")
+      ->check(CLI::Range(16, 4096));
+  capture->add_option("--frames-per-ring", scan_cli->scan.frames_per_ring, "views per ring")
+      ->check(CLI::PositiveNumber);
+  capture->add_option("--elevations", scan_cli->scan.elevations_deg, "ring elevations, degrees");
+  capture->add_option("--radius", scan_cli->scan.radius, "m from the scene centre (0: auto)");
+  capture->callback([scan_cli, &exit_code] {
+    auto& o = *scan_cli;
+    const sim::TaskSpec task = sim::LoadTaskSpec(o.task);
+    reality::RealityConnection connection(o.reality.Options());
+    const auto path = reality::ScanPath(task, o.scan);
+    core::Progress progress("scan", static_cast<int64_t>(path.size()), "frames");
+    const core::Scan result = reality::CaptureScan(
+        connection.robot(), path, reality::ScanIntrinsics(o.scan), o.out, &progress);
+    progress.Finish();
+    std::cout << nlohmann::json{{"out", o.out},
+                                {"frames", result.frames.size()},
+                                {"source", result.source}}
+                     .dump(2)
+              << "\n";
+    exit_code = 0;
+  });
+}
+
+}  // namespace twinforge::app

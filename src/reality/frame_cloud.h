@@ -1,0 +1,52 @@
+// The point clouds a policy sees, made from what a robot reports, the same two clouds
+// sim::CloudMaker makes in the twin: scene points back-projected from a depth frame with its
+// reported intrinsics and extrinsics, cropped to the task's workspace, with the arm's own pixels
+// removed; and arm points sampled on the arm at its measured joint positions (forward
+// kinematics), never taken from depth.
+#pragma once
+
+#include <vector>
+
+#include "core/rng.h"
+#include "reality/robot.h"
+#include "sim/camera.h"
+#include "sim/robot.h"
+
+namespace twinforge::reality {
+
+class FrameCloud {
+ public:
+  struct Options {
+    int scene_points = 2048;
+    int arm_points = 512;
+    double arm_margin = 0.03;  // m: depth this close to (or behind) the arm's surface is the arm
+  };
+  FrameCloud(const sim::RobotSpec& robot, const sim::WorkspaceSpec& workspace,
+             const Options& options);
+  ~FrameCloud();
+
+  // Fills scene[scene_points*3] and arm[arm_points*3], robot base frame.
+  void Make(const Observation& observation, const RgbdFrame& frame, core::Rng& rng, float* scene,
+            float* arm);
+  // Removes the arm from a depth image (metres, in place): pixels where the arm, posed at the
+  // observation's joints, is in front of or at the measured depth. Returns how many.
+  int RemoveArm(const Observation& observation, const sim::Camera& camera,
+                std::vector<float>& depth);
+  const Options& options() const { return options_; }
+
+ private:
+  void Pose(const Observation& observation);
+  Options options_;
+  sim::Workspace workspace_;
+  sim::ModelPtr model_;  // the robot alone, base at the origin
+  sim::DataPtr data_;
+  sim::RobotIndex index_;
+  sim::SurfaceSampler arm_sampler_;
+  std::unique_ptr<sim::RayCaster> caster_;  // the robot alone, from the frame's camera
+  std::vector<float> depth_, arm_depth_, scratch_;
+};
+
+// A frame's depth in metres (0 = no return).
+std::vector<float> DepthMetres(const RgbdFrame& frame);
+
+}  // namespace twinforge::reality

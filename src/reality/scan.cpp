@@ -1,0 +1,80 @@
+#include "reality/scan.h"
+
+#include <cmath>
+
+#include "core/error.h"
+#include "sim/camera.h"
+
+namespace twinforge::reality {
+
+namespace {
+
+sim::CameraSpec ScanCameraSpec(const ScanOptions& o) {
+  sim::CameraSpec spec;
+  spec.name = "scan";
+  spec.fovy_deg = o.fovy_deg;
+  spec.width = o.width;
+  spec.height = o.height;
+  return spec;
+}
+
+}  // namespace
+
+sim::CameraIntrinsics ScanIntrinsics(const ScanOptions& options) {
+  return sim::MakeCamera(ScanCameraSpec(options)).intrinsics;
+}
+
+std::vector<core::Pose> ScanPath(const sim::TaskSpec& task, const ScanOptions& options) {
+  const Eigen::Vector3d center(task.camera.look_at.data());
+  const Eigen::Vector3d from = Eigen::Vector3d(task.camera.position.data()) - center;
+  const double radius = options.radius > 0 ? options.radius : from.norm();
+  const double azimuth0 = std::atan2(from.y(), from.x());
+  const double span = options.azimuth_span_deg * M_PI / 180.0;
+  std::vector<core::Pose> path;
+  for (std::size_t ring = 0; ring < options.elevations_deg.size(); ++ring) {
+    const double elevation = options.elevations_deg[ring] * M_PI / 180.0;
+    // Rings run in alternate directions, as a camera on an arm would sweep.
+    for (int i = 0; i < options.frames_per_ring; ++i) {
+      const int k = ring % 2 == 0 ? i : options.frames_per_ring - 1 - i;
+      const double f =
+          options.frames_per_ring > 1 ? double(k) / (options.frames_per_ring - 1) : 0.5;
+      const double azimuth = azimuth0 + (f - 0.5) * span;
+      const Eigen::Vector3d position =
+          center + radius * Eigen::Vector3d(std::cos(elevation) * std::cos(azimuth),
+                                            std::cos(elevation) * std::sin(azimuth),
+                                            std::sin(elevation));
+      sim::CameraSpec spec = ScanCameraSpec(options);
+      spec.position = {position.x(), position.y(), position.z()};
+      spec.look_at = task.camera.look_at;
+      path.push_back(sim::MakeCamera(spec).pose);
+    }
+  }
+  return path;
+}
+
+core::Scan CaptureScan(Robot& robot, const std::vector<core::Pose>& path,
+                       const sim::CameraIntrinsics& intrinsics, const std::filesystem::path& out,
+                       core::Progress* progress) {
+  const RobotInfo info = robot.Info();
+  if (!info.can_scan)
+    throw core::Error(info.name +
+                      " cannot move a camera to scan; take the frames with a hand-held RGB-D "
+                      "camera and write them in the layout of docs/scan.md");
+  core::ScanWriter writer(out, info.name, info.robot);
+  for (const core::Pose& pose : path) {
+    const Observation o = robot.Observe(false);
+    const RgbdFrame frame = robot.Capture({pose, intrinsics});
+    const auto& k = frame.intrinsics;
+    core::ScanFrameInfo f;
+    f.stamp = frame.stamp;
+    f.intrinsics = {k.width, k.height, k.fx, k.fy, k.cx, k.cy};
+    f.camera_to_base = frame.extrinsics;
+    std::copy(o.q.data(), o.q.data() + sim::kArmDof, f.joint_positions.begin());
+    f.gripper_width = o.gripper_width;
+    writer.Add(std::move(f), frame.rgb, frame.depth);
+    if (progress) progress->Advance();
+  }
+  return writer.scan();
+}
+
+}  // namespace twinforge::reality

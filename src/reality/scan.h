@@ -1,0 +1,49 @@
+// Scanning a scene through the robot: the scan camera is moved through a path of poses around
+// the task's workspace and one RGB-D frame is saved at each, in the layout of core/scan.h.
+#pragma once
+
+#include <filesystem>
+#include <vector>
+
+#include "core/progress.h"
+#include "core/scan.h"
+#include "reality/robot.h"
+#include "sim/task.h"
+
+namespace twinforge::reality {
+
+struct ScanOptions {
+  int width = 640, height = 480;
+  double fovy_deg = 58;
+  int frames_per_ring = 12;
+  std::vector<double> elevations_deg = {25, 50};  // one ring of views per elevation
+  double azimuth_span_deg = 200;  // centred on the task camera's direction from the scene
+  double radius = 0;              // m from the scene centre; 0: the task camera's distance
+  template <class A>
+  void Serialize(A& a) {
+    a("width", width);
+    a("height", height);
+    a("fovy_deg", fovy_deg);
+    a("frames_per_ring", frames_per_ring);
+    a("elevations_deg", elevations_deg);
+    a("azimuth_span_deg", azimuth_span_deg);
+    a("radius", radius);
+    a.Require(width > 0 && height > 0 && width <= 4096 && height <= 4096, "width",
+              "an image size in 1..4096");
+    a.Require(frames_per_ring >= 1, "frames_per_ring", "at least one frame");
+    a.Require(!elevations_deg.empty(), "elevations_deg", "at least one elevation");
+    a.Require(radius >= 0, "radius", "a non-negative distance");
+  }
+};
+
+// Camera poses (camera -> robot base, OpenCV axes) looking at the task camera's look-at point
+// from rings around it, and the intrinsics they share.
+std::vector<core::Pose> ScanPath(const sim::TaskSpec& task, const ScanOptions& options);
+sim::CameraIntrinsics ScanIntrinsics(const ScanOptions& options);
+
+// Takes one frame per pose and writes the scan to `out` (which must not hold a scan yet).
+core::Scan CaptureScan(Robot& robot, const std::vector<core::Pose>& path,
+                       const sim::CameraIntrinsics& intrinsics, const std::filesystem::path& out,
+                       core::Progress* progress = nullptr);
+
+}  // namespace twinforge::reality
