@@ -1,14 +1,17 @@
 #!/usr/bin/env bash
 # Everything needed on a fresh Debian 12 machine, then the main job on the built-in default.
-# Until the full pipeline lands (issue 9), the main job is the simulation demo: check the
-# machine, measure the open-drawer scripted expert at each randomization level, benchmark the
-# simulator, and write PNG frames of one episode to runs/demo/frames/.
+# Until the full pipeline lands (issue 9), the main job runs the stages built so far on the
+# open-drawer task: check the machine, measure the scripted expert at each randomization level,
+# benchmark the simulator, write PNG frames of one episode, then scan the proxy-reality drawer
+# world and record 15 teleoperated demos from it, all under runs/demo/.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 bash scripts/build.sh
 tf=${TWINFORGE_BUILD_DIR:-build}/src/app/twinforge
 out=runs/demo
+# The previous results are kept, once, in runs/demo.previous.
+if [ -d "$out" ]; then rm -rf "$out.previous" && mv "$out" "$out.previous"; fi
 mkdir -p "$out"
 "$tf" doctor
 for level in 1 2 3; do
@@ -16,4 +19,7 @@ for level in 1 2 3; do
 done
 "$tf" sim bench --task open_drawer | tee "$out/bench.json"
 "$tf" sim view --task open_drawer --level 1 --out "$out/frames"
+"$tf" scan capture --reality proxy:open_drawer --task open_drawer --out "$out/scan" | tee "$out/scan.json"
+"$tf" demos record --reality proxy:open_drawer --task open_drawer --n 15 --out "$out/demos/real.hdf5" \
+  | tee "$out/demos.json"
 echo "main job done: results in $out/"

@@ -105,6 +105,46 @@ TEST_P(World, SolvableThroughTheRobotInterface) {
   EXPECT_GE(successes, episodes - 2) << GetParam();
 }
 
+// Levels 2 and 3 work in the proxy as in the sim: clutter on the table, then pushes while the
+// operator works.
+TEST_P(World, HigherLevelsAddClutterAndPushes) {
+  ProxyReality proxy(ResolveWorldDir(GetParam()));
+  const sim::Env& env = proxy.hidden_env();
+  auto clutter = [&] {
+    int on_table = 0;
+    for (int i = 0; i < env.model()->nmocap; ++i) on_table += env.data()->mocap_pos[3 * i + 2] > -1;
+    return on_table;
+  };
+  proxy.Reset({5, 1});
+  EXPECT_EQ(clutter(), 0);
+  proxy.Reset({5, 2});
+  EXPECT_GE(clutter(), 1);
+  auto pushed_at = [&](int level) {
+    bool pushed = false;
+    for (uint64_t seed = 5; seed < 8 && !pushed; ++seed) {
+      Observation o = proxy.Reset({seed, level});
+      ActionClient client(proxy, env.task().spec().control.limits);
+      for (int t = 0; t < env.task().spec().horizon && !pushed; ++t) {
+        const OperatorInput in = proxy.AskOperator();
+        if (in.kind != OperatorInput::Kind::kAction) break;
+        client.Act(in.action, o);
+        o = proxy.Observe(false);
+        const mjData* d = env.data();
+        for (int i = 0; i < 6 * env.model()->nbody; ++i) pushed |= d->xfrc_applied[i] != 0;
+        // (The arm's own dofs carry its gravity compensation.)
+        const auto& r = env.task().index().robot;
+        for (int i = 0; i < env.model()->nv; ++i)
+          pushed |= d->qfrc_applied[i] != 0 &&
+                    std::find(r.arm_dof.begin(), r.arm_dof.end(), i) == r.arm_dof.end() &&
+                    std::find(r.finger_dof.begin(), r.finger_dof.end(), i) == r.finger_dof.end();
+      }
+    }
+    return pushed;
+  };
+  EXPECT_FALSE(pushed_at(2)) << GetParam();
+  EXPECT_TRUE(pushed_at(3)) << GetParam();
+}
+
 INSTANTIATE_TEST_SUITE_P(Worlds, World, ::testing::ValuesIn(kWorlds));
 
 TEST(DepthSensor, NoiseGrowsWithRangeAndQuantizes) {
