@@ -6,6 +6,7 @@
 #include <memory>
 #include <nlohmann/json.hpp>
 
+#include "app/reality_cli.h"
 #include "core/dataset.h"
 #include "core/log.h"
 #include "reality/connect.h"
@@ -16,22 +17,6 @@
 namespace twinforge::app {
 
 namespace {
-
-struct RealityCli {
-  std::string address = "proxy:open_drawer";
-  std::string token;
-  int timeout_ms = 10000;
-  void Add(CLI::App* command) {
-    command->add_option("--reality", address,
-                        "tcp://host:port of a robot (bridge protocol), or proxy:WORLD to start a "
-                        "proxy-reality world");
-    command->add_option("--token", token, "shared secret, if the robot wants one");
-    command->add_option("--timeout-ms", timeout_ms, "per-request timeout");
-  }
-  reality::ConnectOptions Options() const {
-    return {.address = address, .token = token, .timeout = std::chrono::milliseconds(timeout_ms)};
-  }
-};
 
 struct RecordCli {
   RealityCli reality;

@@ -6,6 +6,7 @@
 #include <memory>
 #include <nlohmann/json.hpp>
 
+#include "app/reality_cli.h"
 #include "reality/bridge.h"
 #include "reality/proxy_reality.h"
 
@@ -19,15 +20,6 @@ void RequestStop(int) { g_stop = true; }
 struct ServeCli {
   std::string world;
   reality::ServeOptions serve;
-};
-
-struct ClientCli {
-  std::string address = "tcp://127.0.0.1:5555";
-  int timeout_ms = 5000;
-  std::string token;
-  reality::ClientOptions Options() const {
-    return {.address = address, .timeout = std::chrono::milliseconds(timeout_ms), .token = token};
-  }
 };
 
 }  // namespace
@@ -53,13 +45,13 @@ void AddRealityCommands(CLI::App& parent, int& exit_code) {
     server.Run(g_stop);
   });
 
-  auto client_cli = std::make_shared<ClientCli>();
+  auto client_cli = std::make_shared<RealityCli>();
+  client_cli->address = "tcp://127.0.0.1:5555";
   auto* ping = reality->add_subcommand("ping", "ask a robot who it is and what it sees (JSON)");
-  ping->add_option("--reality", client_cli->address, "bridge address, tcp://host:port");
-  ping->add_option("--timeout-ms", client_cli->timeout_ms, "per-request timeout");
-  ping->add_option("--token", client_cli->token, "shared secret, if the robot wants one");
+  client_cli->Add(ping);
   ping->callback([client_cli, &exit_code] {
-    reality::BridgeClient client(client_cli->Options());
+    reality::RealityConnection connection(client_cli->Options());
+    reality::Robot& client = connection.robot();
     const reality::RobotInfo info = client.Info();
     const reality::Observation o = client.Observe(true);
     nlohmann::json frames = nlohmann::json::array();
