@@ -4,6 +4,7 @@
 
 #include "core/error.h"
 #include "core/log.h"
+#include "sim/env.h"
 
 namespace twinforge::reality {
 
@@ -19,18 +20,9 @@ struct DemoBuffer {
       actions.push_back(static_cast<float>(action.index));
     else
       actions.insert(actions.end(), action.value.begin(), action.value.end());
-    core::Quat q = o.ee.rotation;
-    if (q.w() < 0) q.coeffs() = -q.coeffs();
-    const double p[sim::kProprioDim] = {o.ee.translation.x(),
-                                        o.ee.translation.y(),
-                                        o.ee.translation.z(),
-                                        q.w(),
-                                        q.x(),
-                                        q.y(),
-                                        q.z(),
-                                        0.5 * o.gripper_width,
-                                        0.5 * o.gripper_width};
-    proprio.insert(proprio.end(), p, p + sim::kProprioDim);
+    proprio.resize(proprio.size() + sim::kProprioDim);
+    sim::MakeProprio(o.ee, 0.5 * o.gripper_width, 0.5 * o.gripper_width,
+                     proprio.data() + proprio.size() - sim::kProprioDim);
     joints.insert(joints.end(), o.q.data(), o.q.data() + sim::kArmDof);
     const auto& c = cloud.options();
     scene.resize(scene.size() + 3 * c.scene_points);

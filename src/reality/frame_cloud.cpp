@@ -33,9 +33,7 @@ void FrameCloud::Pose(const Observation& o) {
 int FrameCloud::RemoveArm(const Observation& observation, const sim::Camera& camera,
                           std::vector<float>& depth) {
   const auto& k = camera.intrinsics;
-  const auto& have = caster_ ? caster_->camera().intrinsics : k;
-  if (!caster_ || have.width != k.width || have.height != k.height || have.fx != k.fx ||
-      have.fy != k.fy || have.cx != k.cx || have.cy != k.cy)
+  if (!caster_ || caster_->camera().intrinsics != k)
     caster_ = std::make_unique<sim::RayCaster>(camera, model_.get());
   caster_->set_pose(camera.pose);
   Pose(observation);

@@ -197,11 +197,7 @@ RgbdFrame ProxyReality::Capture(const CaptureRequest& request) {
                                 std::to_string(k.width) + "x" + std::to_string(k.height));
   if (!request.pose.translation.allFinite() || !request.pose.rotation.coeffs().allFinite())
     throw core::NumericError("capture: the requested camera pose is not finite");
-  const auto same = [](const sim::CameraIntrinsics& a, const sim::CameraIntrinsics& b) {
-    return a.width == b.width && a.height == b.height && a.fx == b.fx && a.fy == b.fy &&
-           a.cx == b.cx && a.cy == b.cy;
-  };
-  if (!scan_caster_ || !same(scan_caster_->camera().intrinsics, k))
+  if (!scan_caster_ || scan_caster_->camera().intrinsics != k)
     scan_caster_ = std::make_unique<sim::RayCaster>(sim::Camera{k, request.pose}, env_->model());
   // Drawn one at a time: the order of arguments in one call is unspecified.
   double draw[6];

@@ -21,6 +21,7 @@ namespace twinforge::sim {
 struct CameraIntrinsics {
   int width = 80, height = 60;
   double fx = 0, fy = 0, cx = 0, cy = 0;
+  bool operator==(const CameraIntrinsics&) const = default;
 };
 
 // A pinhole camera; `pose` maps camera coordinates (OpenCV: x right, y down, z forward) to the

@@ -319,21 +319,18 @@ core::Pose Env::SitePose(int site) const {
 
 core::Pose Env::EePose() const { return SitePose(task_->index().robot.ee_site); }
 
-void Env::Proprio(float* out) const {
-  const core::Pose ee = EePose();
+void MakeProprio(const core::Pose& ee, double finger_left, double finger_right, float* out) {
   core::Quat q = ee.rotation;
   if (q.w() < 0) q.coeffs() = -q.coeffs();  // one sign per orientation
-  const auto& r = task_->index().robot;
-  const double values[kProprioDim] = {ee.translation.x(),
-                                      ee.translation.y(),
-                                      ee.translation.z(),
-                                      q.w(),
-                                      q.x(),
-                                      q.y(),
-                                      q.z(),
-                                      data_->qpos[r.finger_qpos[0]],
-                                      data_->qpos[r.finger_qpos[1]]};
+  const double values[kProprioDim] = {
+      ee.translation.x(), ee.translation.y(), ee.translation.z(), q.w(), q.x(), q.y(), q.z(),
+      finger_left,        finger_right};
   for (int i = 0; i < kProprioDim; ++i) out[i] = static_cast<float>(values[i]);
+}
+
+void Env::Proprio(float* out) const {
+  const auto& r = task_->index().robot;
+  MakeProprio(EePose(), data_->qpos[r.finger_qpos[0]], data_->qpos[r.finger_qpos[1]], out);
 }
 
 void Env::State(float* out) const {

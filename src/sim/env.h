@@ -23,6 +23,9 @@ struct StepResult {
 // Proprioception: tool position (3) and quaternion w,x,y,z (4) in the robot base frame, finger
 // joint positions (2).
 constexpr int kProprioDim = 9;
+// Writes proprioception from a tool pose and the two finger positions (the quaternion's sign is
+// chosen so that w >= 0): the twin, the proxy and a real robot's recorder all fill it here.
+void MakeProprio(const core::Pose& ee, double finger_left, double finger_right, float* out);
 
 class Env {
  public:
