@@ -11,6 +11,7 @@
 #include "reality/robot.h"
 #include "sim/camera.h"
 #include "sim/robot.h"
+#include "sim/robot_mask.h"
 
 namespace twinforge::reality {
 
@@ -35,15 +36,10 @@ class FrameCloud {
   const Options& options() const { return options_; }
 
  private:
-  void Pose(const Observation& observation);
   Options options_;
   sim::Workspace workspace_;
-  sim::ModelPtr model_;  // the robot alone, base at the origin
-  sim::DataPtr data_;
-  sim::RobotIndex index_;
-  sim::SurfaceSampler arm_sampler_;
-  std::unique_ptr<sim::RayCaster> caster_;  // the robot alone, from the frame's camera
-  std::vector<float> depth_, arm_depth_, scratch_;
+  sim::RobotMask robot_;
+  std::vector<float> depth_, scratch_;
 };
 
 // A frame's depth in metres (0 = no return).
