@@ -1,0 +1,107 @@
+#include "real2sim/mesh.h"
+
+#include <open3d/Open3D.h>
+
+#include "core/error.h"
+#include "core/fs.h"
+#include "core/rng.h"
+
+namespace twinforge::real2sim {
+
+Eigen::Vector3d Mesh::min() const {
+  Eigen::Vector3d m = Eigen::Vector3d::Constant(1e300);
+  for (const auto& v : vertices) m = m.cwiseMin(v);
+  return m;
+}
+
+Eigen::Vector3d Mesh::max() const {
+  Eigen::Vector3d m = Eigen::Vector3d::Constant(-1e300);
+  for (const auto& v : vertices) m = m.cwiseMax(v);
+  return m;
+}
+
+double Mesh::Area() const {
+  double area = 0;
+  for (const auto& t : triangles)
+    area += 0.5 * (vertices[t[1]] - vertices[t[0]]).cross(vertices[t[2]] - vertices[t[0]]).norm();
+  return area;
+}
+
+void WriteMesh(const std::filesystem::path& path, const Mesh& mesh) {
+  open3d::geometry::TriangleMesh m;
+  m.vertices_ = mesh.vertices;
+  m.vertex_colors_ = mesh.colors;
+  m.triangles_ = mesh.triangles;
+  if (path.has_parent_path()) core::EnsureDirectory(path.parent_path());
+  // Written beside and renamed into place, so a reader never sees half a mesh.
+  const auto temp = path.parent_path() / (".partial_" + path.filename().string());
+  if (!open3d::io::WriteTriangleMesh(temp.string(), m, /*write_ascii=*/path.extension() == ".obj",
+                                     /*compressed=*/false, /*write_vertex_normals=*/false,
+                                     /*write_vertex_colors=*/!mesh.colors.empty(),
+                                     /*write_triangle_uvs=*/false, /*print_progress=*/false))
+    throw core::IoError("cannot write mesh " + path.string());
+  std::filesystem::rename(temp, path);
+}
+
+Mesh ReadMesh(const std::filesystem::path& path) {
+  if (!std::filesystem::is_regular_file(path))
+    throw core::IoError("cannot read mesh " + path.string() + ": no such file");
+  open3d::geometry::TriangleMesh m;
+  open3d::io::ReadTriangleMeshOptions options;
+  options.enable_post_processing = false;
+  if (!open3d::io::ReadTriangleMesh(path.string(), m, options) || m.triangles_.empty())
+    throw core::IoError("cannot read mesh " + path.string() +
+                        ": not a PLY/OBJ mesh with triangles");
+  return {m.vertices_, m.vertex_colors_, m.triangles_};
+}
+
+std::vector<Eigen::Vector3d> SampleSurface(const Mesh& mesh, int count, uint64_t seed) {
+  std::vector<double> cumulative;
+  cumulative.reserve(mesh.triangles.size());
+  double total = 0;
+  for (const auto& t : mesh.triangles) {
+    total += 0.5 * (mesh.vertices[t[1]] - mesh.vertices[t[0]])
+                       .cross(mesh.vertices[t[2]] - mesh.vertices[t[0]])
+                       .norm();
+    cumulative.push_back(total);
+  }
+  std::vector<Eigen::Vector3d> points;
+  if (total <= 0) return points;
+  core::Rng rng(seed, 0x5a);
+  points.reserve(count);
+  for (int i = 0; i < count; ++i) {
+    const double pick = rng.Uniform() * total;
+    const auto& t = mesh.triangles[std::lower_bound(cumulative.begin(), cumulative.end(), pick) -
+                                   cumulative.begin()];
+    double a = rng.Uniform(), b = rng.Uniform();
+    if (a + b > 1) {
+      a = 1 - a;
+      b = 1 - b;
+    }
+    points.push_back(mesh.vertices[t[0]] + a * (mesh.vertices[t[1]] - mesh.vertices[t[0]]) +
+                     b * (mesh.vertices[t[2]] - mesh.vertices[t[0]]));
+  }
+  return points;
+}
+
+double ChamferDistance(const std::vector<Eigen::Vector3d>& a,
+                       const std::vector<Eigen::Vector3d>& b) {
+  if (a.empty() || b.empty()) return std::numeric_limits<double>::infinity();
+  auto directed = [](const std::vector<Eigen::Vector3d>& from,
+                     const std::vector<Eigen::Vector3d>& to) {
+    open3d::geometry::PointCloud cloud;
+    cloud.points_ = to;
+    open3d::geometry::KDTreeFlann tree(cloud);
+    std::vector<int> index(1);
+    std::vector<double> d2(1);
+    double sum = 0;
+    for (const auto& p : from) {
+      tree.SearchKNN(p, 1, index, d2);
+      sum += std::sqrt(d2[0]);
+    }
+    return sum / from.size();
+  };
+  return 0.5 * (directed(a, b) + directed(b, a));
+}
+
+}  // namespace twinforge::real2sim

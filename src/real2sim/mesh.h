@@ -1,0 +1,40 @@
+// Triangle meshes and planes as real2sim passes them between steps (Open3D stays inside the .cpp
+// files). Meshes are written as PLY or OBJ so other tools can open them.
+#pragma once
+
+#include <Eigen/Core>
+#include <filesystem>
+#include <vector>
+
+namespace twinforge::real2sim {
+
+struct Mesh {
+  std::vector<Eigen::Vector3d> vertices;
+  std::vector<Eigen::Vector3d> colors;  // per vertex, 0..1; empty or one per vertex
+  std::vector<Eigen::Vector3i> triangles;
+  bool empty() const { return triangles.empty(); }
+  Eigen::Vector3d min() const;
+  Eigen::Vector3d max() const;
+  double Area() const;
+};
+
+// A plane n.x + d = 0 with |n| = 1.
+struct Plane {
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
+  double offset = 0;
+  double Distance(const Eigen::Vector3d& p) const { return normal.dot(p) + offset; }
+};
+
+// Writes `mesh` as PLY (binary, with colours) or OBJ by the extension. Throws IoError.
+void WriteMesh(const std::filesystem::path& path, const Mesh& mesh);
+// Reads a PLY or OBJ mesh. Throws IoError naming the file.
+Mesh ReadMesh(const std::filesystem::path& path);
+
+// Points on a mesh's surface, area-weighted, deterministic for a seed.
+std::vector<Eigen::Vector3d> SampleSurface(const Mesh& mesh, int count, uint64_t seed);
+
+// Mean of the two directed mean nearest-neighbour distances (m): the symmetric Chamfer distance.
+double ChamferDistance(const std::vector<Eigen::Vector3d>& a,
+                       const std::vector<Eigen::Vector3d>& b);
+
+}  // namespace twinforge::real2sim
