@@ -4,57 +4,13 @@
 #include <unistd.h>
 
 #include "core/rng.h"
-#include "sim/camera.h"
-#include "sim/model.h"
+#include "real2sim/test_scenes.h"
 
 namespace twinforge::real2sim {
 namespace {
 
 constexpr double kYaw = 0.3;
 const Eigen::Vector3d kBoxCentre(0.6, 0.05, 0.05), kBoxHalf(0.1, 0.075, 0.05);
-
-// A known box on a table, seen from a ring of cameras with a little depth noise; written as a
-// scan the way `scan capture` writes one.
-core::Scan SyntheticScan(const std::filesystem::path& dir) {
-  const std::string xml = R"(<mujoco><compiler angle="radian"/><worldbody>
-      <geom type="box" pos="0.5 0 -0.02" size="0.8 0.8 0.02" rgba="0.7 0.7 0.7 1"/>
-      <geom type="box" pos="0.6 0.05 0.05" size="0.1 0.075 0.05" euler="0 0 0.3"
-            rgba="0.8 0.3 0.2 1"/>
-    </worldbody></mujoco>)";
-  const sim::ModelPtr m = sim::LoadModelFromText(xml);
-  const sim::DataPtr d = sim::MakeData(m.get());
-  mj_forward(m.get(), d.get());
-  const sim::RobotSpec robot = sim::LoadRobotSpec(sim::DefaultRobotPath());
-  core::ScanWriter writer(dir, "synthetic", "panda");
-  core::Rng rng(3);
-  for (int i = 0; i < 16; ++i) {
-    const double azimuth = -1.6 + 3.2 * (i % 8) / 7.0, elevation = i < 8 ? 0.5 : 0.9;
-    sim::CameraSpec spec;
-    spec.width = 320;
-    spec.height = 240;
-    spec.look_at = {0.6, 0.05, 0.05};
-    spec.position = {0.6 + 0.8 * std::cos(elevation) * std::cos(azimuth),
-                     0.05 + 0.8 * std::cos(elevation) * std::sin(azimuth),
-                     0.05 + 0.8 * std::sin(elevation)};
-    const sim::Camera camera = sim::MakeCamera(spec);
-    sim::RayCaster caster(camera, m.get());
-    const std::size_t n = 320 * 240;
-    std::vector<float> depth(n);
-    std::vector<uint8_t> rgb(3 * n);
-    caster.Render(m.get(), d.get(), core::Pose{}, depth.data(), rgb.data());
-    std::vector<uint16_t> mm(n);
-    for (std::size_t p = 0; p < n; ++p)
-      mm[p] = depth[p] > 0 ? uint16_t(std::lround(1000 * (depth[p] + 0.001 * rng.Normal()))) : 0;
-    core::ScanFrameInfo info;
-    const auto& k = camera.intrinsics;
-    info.intrinsics = {k.width, k.height, k.fx, k.fy, k.cx, k.cy};
-    info.camera_to_base = camera.pose;
-    std::copy(robot.home.begin(), robot.home.end(), info.joint_positions.begin());
-    info.gripper_width = 0.08;
-    writer.Add(info, rgb, mm);
-  }
-  return writer.scan();
-}
 
 // Points on the box's five visible faces (not the bottom).
 std::vector<Eigen::Vector3d> BoxSurface() {
@@ -75,7 +31,12 @@ TEST(Fusion, RecoversAKnownBoxAndItsTable) {
   const auto dir = std::filesystem::temp_directory_path() /
                    ("twinforge_fusion_test_" + std::to_string(::getpid()));
   std::filesystem::remove_all(dir);
-  const core::Scan scan = SyntheticScan(dir);
+  testing::SyntheticScan(dir, R"(<mujoco><compiler angle="radian"/><worldbody>
+      <geom type="box" pos="0.5 0 -0.02" size="0.8 0.8 0.02" rgba="0.7 0.7 0.7 1"/>
+      <geom type="box" pos="0.6 0.05 0.05" size="0.1 0.075 0.05" euler="0 0 0.3"
+            rgba="0.8 0.3 0.2 1"/>
+    </worldbody></mujoco>)",
+                         {0.6, 0.05, 0.05});
   const Fusion fusion =
       FuseScan(core::ReadScan(dir), sim::LoadRobotSpec(sim::DefaultRobotPath()), {});
   ASSERT_FALSE(fusion.mesh.empty());
