@@ -107,16 +107,12 @@ Fusion FuseScan(const core::Scan& scan, const sim::RobotSpec& robot, const Fusio
   }
   const auto mesh = volume.ExtractTriangleMesh();
   // Keep the triangles whose vertices are all inside the crop box.
-  std::vector<int> remap(mesh->vertices_.size(), -1);
-  for (std::size_t i = 0; i < mesh->vertices_.size(); ++i) {
-    if (!Inside(mesh->vertices_[i], options)) continue;
-    remap[i] = static_cast<int>(fusion.mesh.vertices.size());
-    fusion.mesh.vertices.push_back(mesh->vertices_[i]);
-    if (mesh->HasVertexColors()) fusion.mesh.colors.push_back(mesh->vertex_colors_[i]);
-  }
-  for (const auto& t : mesh->triangles_)
-    if (remap[t[0]] >= 0 && remap[t[1]] >= 0 && remap[t[2]] >= 0)
-      fusion.mesh.triangles.emplace_back(remap[t[0]], remap[t[1]], remap[t[2]]);
+  const Mesh full{mesh->vertices_, mesh->vertex_colors_, mesh->triangles_};
+  fusion.mesh = KeepTriangles(full, [&](std::size_t i) {
+    const auto& t = full.triangles[i];
+    return Inside(full.vertices[t[0]], options) && Inside(full.vertices[t[1]], options) &&
+           Inside(full.vertices[t[2]], options);
+  });
   const auto cloud = volume.ExtractPointCloud();
   for (std::size_t i = 0; i < cloud->points_.size(); ++i) {
     if (!Inside(cloud->points_[i], options)) continue;

@@ -25,6 +25,28 @@ struct Plane {
   double Distance(const Eigen::Vector3d& p) const { return normal.dot(p) + offset; }
 };
 
+// The triangles for which keep(triangle index) is true, with only the vertices they use.
+template <class Keep>
+Mesh KeepTriangles(const Mesh& mesh, Keep keep) {
+  Mesh out;
+  std::vector<int> remap(mesh.vertices.size(), -1);
+  for (std::size_t i = 0; i < mesh.triangles.size(); ++i) {
+    if (!keep(i)) continue;
+    Eigen::Vector3i mapped;
+    for (int c = 0; c < 3; ++c) {
+      const int v = mesh.triangles[i][c];
+      if (remap[v] < 0) {
+        remap[v] = static_cast<int>(out.vertices.size());
+        out.vertices.push_back(mesh.vertices[v]);
+        if (!mesh.colors.empty()) out.colors.push_back(mesh.colors[v]);
+      }
+      mapped[c] = remap[v];
+    }
+    out.triangles.push_back(mapped);
+  }
+  return out;
+}
+
 // Writes `mesh` as PLY (binary, with colours) or OBJ by the extension. Throws IoError.
 void WriteMesh(const std::filesystem::path& path, const Mesh& mesh);
 // Reads a PLY or OBJ mesh. Throws IoError naming the file.

@@ -25,24 +25,11 @@ namespace {
 
 // The part of `mesh` whose triangles have every vertex labelled `label`.
 Mesh Submesh(const Mesh& mesh, const std::vector<int>& vertex_label, int label) {
-  Mesh out;
-  std::vector<int> remap(mesh.vertices.size(), -1);
-  for (const auto& t : mesh.triangles) {
-    if (vertex_label[t[0]] != label || vertex_label[t[1]] != label || vertex_label[t[2]] != label)
-      continue;
-    Eigen::Vector3i mapped;
-    for (int c = 0; c < 3; ++c) {
-      int& r = remap[t[c]];
-      if (r < 0) {
-        r = static_cast<int>(out.vertices.size());
-        out.vertices.push_back(mesh.vertices[t[c]]);
-        if (!mesh.colors.empty()) out.colors.push_back(mesh.colors[t[c]]);
-      }
-      mapped[c] = r;
-    }
-    out.triangles.push_back(mapped);
-  }
-  return out;
+  return KeepTriangles(mesh, [&](std::size_t i) {
+    const auto& t = mesh.triangles[i];
+    return vertex_label[t[0]] == label && vertex_label[t[1]] == label &&
+           vertex_label[t[2]] == label;
+  });
 }
 
 }  // namespace

@@ -1,0 +1,99 @@
+#include "real2sim/twin_spec.h"
+
+#include <map>
+#include <set>
+
+#include "core/error.h"
+#include "core/fs.h"
+
+namespace twinforge::real2sim {
+
+core::Pose BoxSpec::pose() const {
+  return {Eigen::Vector3d(center.data()), core::FromRollPitchYaw(euler[0], euler[1], euler[2])};
+}
+
+bool BoxSpec::Contains(const Eigen::Vector3d& p) const {
+  const Eigen::Vector3d local = pose().Inverse() * p;
+  for (int i = 0; i < 3; ++i)
+    if (std::abs(local[i]) > 0.5 * size[i]) return false;
+  return true;
+}
+
+Mesh CutMesh(const Mesh& mesh, const CutSpec& cut) {
+  const bool keep_inside = cut.op == CutOp::kIntersect;
+  return KeepTriangles(mesh, [&](std::size_t i) {
+    const auto& t = mesh.triangles[i];
+    const Eigen::Vector3d centroid =
+        (mesh.vertices[t[0]] + mesh.vertices[t[1]] + mesh.vertices[t[2]]) / 3.0;
+    return cut.box.Contains(centroid) == keep_inside;
+  });
+}
+
+Mesh PartMesh(const PartSpec& part, const std::filesystem::path& twin_dir) {
+  Mesh mesh = ReadMesh(twin_dir / part.mesh);
+  for (const auto& cut : part.cuts) mesh = CutMesh(mesh, cut);
+  return mesh;
+}
+
+void ValidateTwinSpec(const TwinSpec& spec, const std::filesystem::path& twin_dir,
+                      const std::string& origin) {
+  auto fail = [&](const std::string& field, const std::string& message) {
+    throw core::ConfigError(origin, field, message);
+  };
+  std::set<std::string> parts;
+  for (std::size_t i = 0; i < spec.parts.size(); ++i) {
+    const auto& p = spec.parts[i];
+    const std::string at = "parts[" + std::to_string(i) + "]";
+    if (p.name == "world") fail(at + ".name", "'world' is reserved for the static scene");
+    if (!parts.insert(p.name).second) fail(at + ".name", "a second part named '" + p.name + "'");
+    if (!std::filesystem::is_regular_file(twin_dir / p.mesh))
+      fail(at + ".mesh", "no mesh file " + (twin_dir / p.mesh).string());
+  }
+  std::set<std::string> joints, children;
+  std::map<std::string, std::string> parent_of;
+  for (std::size_t i = 0; i < spec.joints.size(); ++i) {
+    const auto& j = spec.joints[i];
+    const std::string at = "joints[" + std::to_string(i) + "]";
+    if (!joints.insert(j.name).second) fail(at + ".name", "a second joint named '" + j.name + "'");
+    if (j.parent != "world" && !parts.count(j.parent))
+      fail(at + ".parent", "no part named '" + j.parent + "' (nor 'world')");
+    if (!parts.count(j.child)) fail(at + ".child", "no part named '" + j.child + "'");
+    if (j.parent == j.child) fail(at + ".child", "a part cannot be jointed to itself");
+    if (!children.insert(j.child).second)
+      fail(at + ".child", "part '" + j.child + "' is already the child of another joint");
+    if (Eigen::Vector3d(j.axis.data()).norm() < 1e-9) fail(at + ".axis", "a non-zero axis");
+    parent_of[j.child] = j.parent;
+  }
+  for (const auto& [child, parent] : parent_of) {  // no cycles: every chain reaches the world
+    std::string at = child;
+    for (std::size_t steps = 0; parent_of.count(at); ++steps) {
+      at = parent_of[at];
+      if (steps > parent_of.size())
+        fail("joints", "the joints form a loop through '" + child + "'");
+    }
+  }
+  std::set<std::string> sites;
+  for (std::size_t i = 0; i < spec.sites.size(); ++i) {
+    const auto& s = spec.sites[i];
+    const std::string at = "sites[" + std::to_string(i) + "]";
+    if (!sites.insert(s.name).second) fail(at + ".name", "a second site named '" + s.name + "'");
+    if (s.part != "world" && !parts.count(s.part))
+      fail(at + ".part", "no part named '" + s.part + "' (nor 'world')");
+  }
+}
+
+TwinSpec LoadTwinSpec(const std::filesystem::path& path) {
+  TwinSpec spec = core::LoadConfig<TwinSpec>(path);
+  ValidateTwinSpec(spec, path.parent_path(), path.string());
+  return spec;
+}
+
+void SaveTwinSpec(const std::filesystem::path& path, const TwinSpec& spec) {
+  ValidateTwinSpec(spec, path.parent_path(), path.string());
+  if (std::filesystem::exists(path))
+    std::filesystem::copy_file(path, path.string() + ".bak",
+                               std::filesystem::copy_options::overwrite_existing);
+  core::SaveConfig(path, spec);
+}
+
+}  // namespace twinforge::real2sim
