@@ -55,7 +55,8 @@ Mesh ReadMesh(const std::filesystem::path& path) {
   return {m.vertices_, m.vertex_colors_, m.triangles_};
 }
 
-std::vector<Eigen::Vector3d> SampleSurface(const Mesh& mesh, int count, uint64_t seed) {
+std::vector<Eigen::Vector3d> SampleSurface(const Mesh& mesh, int count, uint64_t seed,
+                                           std::vector<Eigen::Vector3d>* normals) {
   std::vector<double> cumulative;
   cumulative.reserve(mesh.triangles.size());
   double total = 0;
@@ -69,6 +70,7 @@ std::vector<Eigen::Vector3d> SampleSurface(const Mesh& mesh, int count, uint64_t
   if (total <= 0) return points;
   core::Rng rng(seed, 0x5a);
   points.reserve(count);
+  if (normals) normals->clear();
   for (int i = 0; i < count; ++i) {
     const double pick = rng.Uniform() * total;
     const auto& t = mesh.triangles[std::lower_bound(cumulative.begin(), cumulative.end(), pick) -
@@ -78,8 +80,10 @@ std::vector<Eigen::Vector3d> SampleSurface(const Mesh& mesh, int count, uint64_t
       a = 1 - a;
       b = 1 - b;
     }
-    points.push_back(mesh.vertices[t[0]] + a * (mesh.vertices[t[1]] - mesh.vertices[t[0]]) +
-                     b * (mesh.vertices[t[2]] - mesh.vertices[t[0]]));
+    const Eigen::Vector3d e1 = mesh.vertices[t[1]] - mesh.vertices[t[0]],
+                          e2 = mesh.vertices[t[2]] - mesh.vertices[t[0]];
+    points.push_back(mesh.vertices[t[0]] + a * e1 + b * e2);
+    if (normals) normals->push_back(e1.cross(e2).normalized());
   }
   return points;
 }

@@ -52,8 +52,10 @@ void WriteMesh(const std::filesystem::path& path, const Mesh& mesh);
 // Reads a PLY or OBJ mesh. Throws IoError naming the file.
 Mesh ReadMesh(const std::filesystem::path& path);
 
-// Points on a mesh's surface, area-weighted, deterministic for a seed.
-std::vector<Eigen::Vector3d> SampleSurface(const Mesh& mesh, int count, uint64_t seed);
+// Points on a mesh's surface, area-weighted, deterministic for a seed; with `normals`, also
+// the unit normal of the triangle each came from (by the triangle's winding).
+std::vector<Eigen::Vector3d> SampleSurface(const Mesh& mesh, int count, uint64_t seed,
+                                           std::vector<Eigen::Vector3d>* normals = nullptr);
 
 // Mean of the two directed mean nearest-neighbour distances (m): the symmetric Chamfer distance.
 double ChamferDistance(const std::vector<Eigen::Vector3d>& a,
