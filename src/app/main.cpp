@@ -6,6 +6,7 @@
 #include "app/doctor.h"
 #include "app/reality_commands.h"
 #include "app/sim_commands.h"
+#include "app/twin_commands.h"
 #include "core/error.h"
 #include "core/log.h"
 #include "learn/torch_runtime.h"
@@ -28,6 +29,7 @@ int main(int argc, char** argv) {
   app::AddSimCommands(app, exit_code);
   app::AddRealityCommands(app, exit_code);
   app::AddDataCommands(app, exit_code);
+  app::AddTwinCommands(app, exit_code);
 
   try {
     app.parse(argc, argv);

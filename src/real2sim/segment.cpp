@@ -48,8 +48,12 @@ Segmentation SegmentScene(const Fusion& fusion, const SegmentOptions& options) {
   for (std::size_t i = 0; i < labels.size(); ++i)
     if (labels[i] >= 0) clusters[labels[i]].push_back(above.points_[i]);
   std::vector<std::vector<Eigen::Vector3d>> kept;
-  for (auto& [label, points] : clusters)
-    if (static_cast<int>(points.size()) >= options.min_points) kept.push_back(std::move(points));
+  for (auto& [label, points] : clusters) {
+    double top = 0;
+    for (const auto& p : points) top = std::max(top, fusion.support.Distance(p));
+    if (static_cast<int>(points.size()) >= options.min_points && top >= options.min_top)
+      kept.push_back(std::move(points));
+  }
   // Largest first, ties by position, so names do not depend on DBSCAN's label order.
   std::sort(kept.begin(), kept.end(), [](const auto& a, const auto& b) {
     if (a.size() != b.size()) return a.size() > b.size();

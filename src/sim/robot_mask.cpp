@@ -17,16 +17,32 @@ void RobotMask::Pose(const ArmVector& q, double gripper_width) {
   mj_kinematics(model_.get(), d);
 }
 
-int RobotMask::Remove(const Camera& camera, std::vector<float>& depth, double margin) {
+int RobotMask::Remove(const Camera& camera, std::vector<float>& depth, double margin, int grow) {
   if (!caster_ || caster_->camera().intrinsics != camera.intrinsics)
     caster_ = std::make_unique<RayCaster>(camera, model_.get());
   caster_->set_pose(camera.pose);
   robot_depth_.resize(depth.size());
   caster_->Render(model_.get(), data_.get(), core::Pose{}, robot_depth_.data(), nullptr, true);
+  // Grow the silhouette: each pixel takes the nearest robot depth around it.
+  const int w = camera.intrinsics.width, h = camera.intrinsics.height;
+  grown_ = robot_depth_;
+  if (grow > 0)
+    for (int v = 0; v < h; ++v)
+      for (int u = 0; u < w; ++u) {
+        float nearest = robot_depth_[v * w + u];
+        for (int dv = -grow; dv <= grow; ++dv)
+          for (int du = -grow; du <= grow; ++du) {
+            const int uu = u + du, vv = v + dv;
+            if (uu < 0 || vv < 0 || uu >= w || vv >= h) continue;
+            const float z = robot_depth_[vv * w + uu];
+            if (z > 0 && (nearest <= 0 || z < nearest)) nearest = z;
+          }
+        grown_[v * w + u] = nearest;
+      }
   int removed = 0;
   for (std::size_t i = 0; i < depth.size(); ++i) {
-    if (robot_depth_[i] <= 0 || depth[i] <= 0) continue;
-    if (depth[i] > robot_depth_[i] - margin) {
+    if (grown_[i] <= 0 || depth[i] <= 0) continue;
+    if (depth[i] > grown_[i] - margin) {
       depth[i] = 0;
       ++removed;
     }
