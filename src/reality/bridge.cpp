@@ -67,31 +67,15 @@ const json::binary_t& Binary(const json& j, const char* key, std::size_t bytes) 
   return v.get_binary();
 }
 
-json EncodeFrame(const RgbdFrame& f) {
-  const auto& k = f.intrinsics;
-  std::vector<uint8_t> depth(f.depth.size() * 2);
-  for (std::size_t i = 0; i < f.depth.size(); ++i) {  // little-endian on the wire
-    depth[2 * i] = static_cast<uint8_t>(f.depth[i] & 0xff);
-    depth[2 * i + 1] = static_cast<uint8_t>(f.depth[i] >> 8);
-  }
-  return {{"camera", f.camera},
-          {"stamp", f.stamp},
-          {"width", k.width},
-          {"height", k.height},
-          {"fx", k.fx},
-          {"fy", k.fy},
-          {"cx", k.cx},
-          {"cy", k.cy},
-          {"extrinsics", EncodePose(f.extrinsics)},
-          {"rgb", json::binary(f.rgb)},
-          {"depth", json::binary(std::move(depth))}};
+// Intrinsics as fields of a map: a frame carries them at its top level, a capture request
+// under "intrinsics".
+json EncodeIntrinsics(const sim::CameraIntrinsics& k) {
+  return {{"width", k.width}, {"height", k.height}, {"fx", k.fx},
+          {"fy", k.fy},       {"cx", k.cx},         {"cy", k.cy}};
 }
 
-RgbdFrame DecodeFrame(const json& j) {
-  RgbdFrame f;
-  f.camera = String(j, "camera");
-  f.stamp = Number<double>(j, "stamp");
-  auto& k = f.intrinsics;
+sim::CameraIntrinsics DecodeIntrinsics(const json& j) {
+  sim::CameraIntrinsics k;
   k.width = Number<int>(j, "width");
   k.height = Number<int>(j, "height");
   if (k.width <= 0 || k.height <= 0 || k.width > 8192 || k.height > 8192)
@@ -101,6 +85,30 @@ RgbdFrame DecodeFrame(const json& j) {
   k.fy = Number<double>(j, "fy");
   k.cx = Number<double>(j, "cx");
   k.cy = Number<double>(j, "cy");
+  return k;
+}
+
+json EncodeFrame(const RgbdFrame& f) {
+  std::vector<uint8_t> depth(f.depth.size() * 2);
+  for (std::size_t i = 0; i < f.depth.size(); ++i) {  // little-endian on the wire
+    depth[2 * i] = static_cast<uint8_t>(f.depth[i] & 0xff);
+    depth[2 * i + 1] = static_cast<uint8_t>(f.depth[i] >> 8);
+  }
+  json j = EncodeIntrinsics(f.intrinsics);
+  j.update({{"camera", f.camera},
+            {"stamp", f.stamp},
+            {"extrinsics", EncodePose(f.extrinsics)},
+            {"rgb", json::binary(f.rgb)},
+            {"depth", json::binary(std::move(depth))}});
+  return j;
+}
+
+RgbdFrame DecodeFrame(const json& j) {
+  RgbdFrame f;
+  f.camera = String(j, "camera");
+  f.stamp = Number<double>(j, "stamp");
+  f.intrinsics = DecodeIntrinsics(j);
+  const auto& k = f.intrinsics;
   f.extrinsics = DecodePose(Field(j, "extrinsics"));
   const std::size_t pixels = std::size_t(k.width) * k.height;
   const auto& rgb = Binary(j, "rgb", pixels * 3);
@@ -280,9 +288,7 @@ json BridgeServer::Handle(const json& request) {
     if (op == "capture") {
       CaptureRequest r;
       r.pose = DecodePose(Field(request, "pose"));
-      const json& k = Field(request, "intrinsics");
-      r.intrinsics = {Number<int>(k, "width"), Number<int>(k, "height"), Number<double>(k, "fx"),
-                      Number<double>(k, "fy"), Number<double>(k, "cx"),  Number<double>(k, "cy")};
+      r.intrinsics = DecodeIntrinsics(Field(request, "intrinsics"));
       return Ok({{"frame", EncodeFrame(robot_.Capture(r))}});
     }
     if (op == "operator") return Ok({{"input", EncodeOperatorInput(robot_.AskOperator())}});
@@ -426,16 +432,9 @@ SuccessAnswer BridgeClient::QuerySuccess() {
 }
 
 RgbdFrame BridgeClient::Capture(const CaptureRequest& request) {
-  const auto& k = request.intrinsics;
   return DecodeFrame(Field(Call({{"op", "capture"},
                                  {"pose", EncodePose(request.pose)},
-                                 {"intrinsics",
-                                  {{"width", k.width},
-                                   {"height", k.height},
-                                   {"fx", k.fx},
-                                   {"fy", k.fy},
-                                   {"cx", k.cx},
-                                   {"cy", k.cy}}}}),
+                                 {"intrinsics", EncodeIntrinsics(request.intrinsics)}}),
                            "frame"));
 }
 
