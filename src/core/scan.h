@@ -24,14 +24,10 @@
 #include <string>
 #include <vector>
 
+#include "core/pinhole.h"
 #include "core/se3.h"
 
 namespace twinforge::core {
-
-struct PinholeIntrinsics {
-  int width = 0, height = 0;
-  double fx = 0, fy = 0, cx = 0, cy = 0;
-};
 
 struct ScanFrameInfo {
   std::string color, depth;  // relative to the scan directory

@@ -13,14 +13,10 @@ namespace {
 // The points of `from` farther than `distance` from every point of `to`.
 std::vector<Eigen::Vector3d> Changed(const std::vector<Eigen::Vector3d>& from,
                                      const std::vector<Eigen::Vector3d>& to, double distance) {
-  open3d::geometry::PointCloud cloud;
-  cloud.points_ = to;
-  open3d::geometry::KDTreeFlann tree(cloud);
-  std::vector<int> index(1);
-  std::vector<double> d2(1);
+  const std::vector<double> nearest = NearestDistances(from, to);
   std::vector<Eigen::Vector3d> out;
-  for (const auto& p : from)
-    if (tree.SearchKNN(p, 1, index, d2) < 1 || d2[0] > distance * distance) out.push_back(p);
+  for (std::size_t i = 0; i < from.size(); ++i)
+    if (nearest[i] > distance) out.push_back(from[i]);
   return out;
 }
 

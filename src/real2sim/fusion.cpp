@@ -87,7 +87,7 @@ Fusion FuseScan(const core::Scan& scan, const sim::RobotSpec& robot, const Fusio
     const auto* mm = reinterpret_cast<const uint16_t*>(depth_png.bytes.data());
     depth.resize(n);
     for (std::size_t i = 0; i < n; ++i) depth[i] = float(mm[i] / scan.depth_scale);
-    const sim::Camera camera{{k.width, k.height, k.fx, k.fy, k.cx, k.cy}, f.camera_to_base};
+    const sim::Camera camera{k, f.camera_to_base};
     if (mask) {
       mask->Pose(sim::ArmVector(f.joint_positions.data()), f.gripper_width);
       fusion.robot_pixels += mask->Remove(camera, depth, options.robot_margin);

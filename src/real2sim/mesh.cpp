@@ -2,6 +2,8 @@
 
 #include <open3d/Open3D.h>
 
+#include <numeric>
+
 #include "core/error.h"
 #include "core/fs.h"
 #include "core/rng.h"
@@ -88,24 +90,27 @@ std::vector<Eigen::Vector3d> SampleSurface(const Mesh& mesh, int count, uint64_t
   return points;
 }
 
+std::vector<double> NearestDistances(const std::vector<Eigen::Vector3d>& from,
+                                     const std::vector<Eigen::Vector3d>& to) {
+  std::vector<double> distances(from.size(), std::numeric_limits<double>::infinity());
+  if (to.empty()) return distances;
+  open3d::geometry::PointCloud cloud;
+  cloud.points_ = to;
+  open3d::geometry::KDTreeFlann tree(cloud);
+  std::vector<int> index(1);
+  std::vector<double> d2(1);
+  for (std::size_t i = 0; i < from.size(); ++i)
+    if (tree.SearchKNN(from[i], 1, index, d2) == 1) distances[i] = std::sqrt(d2[0]);
+  return distances;
+}
+
 double ChamferDistance(const std::vector<Eigen::Vector3d>& a,
                        const std::vector<Eigen::Vector3d>& b) {
   if (a.empty() || b.empty()) return std::numeric_limits<double>::infinity();
-  auto directed = [](const std::vector<Eigen::Vector3d>& from,
-                     const std::vector<Eigen::Vector3d>& to) {
-    open3d::geometry::PointCloud cloud;
-    cloud.points_ = to;
-    open3d::geometry::KDTreeFlann tree(cloud);
-    std::vector<int> index(1);
-    std::vector<double> d2(1);
-    double sum = 0;
-    for (const auto& p : from) {
-      tree.SearchKNN(p, 1, index, d2);
-      sum += std::sqrt(d2[0]);
-    }
-    return sum / from.size();
+  auto mean = [](const std::vector<double>& d) {
+    return std::accumulate(d.begin(), d.end(), 0.0) / double(d.size());
   };
-  return 0.5 * (directed(a, b) + directed(b, a));
+  return 0.5 * (mean(NearestDistances(a, b)) + mean(NearestDistances(b, a)));
 }
 
 }  // namespace twinforge::real2sim

@@ -57,6 +57,11 @@ Mesh ReadMesh(const std::filesystem::path& path);
 std::vector<Eigen::Vector3d> SampleSurface(const Mesh& mesh, int count, uint64_t seed,
                                            std::vector<Eigen::Vector3d>* normals = nullptr);
 
+// For each point of `from`, the distance (m) to the nearest point of `to` (infinity if `to` is
+// empty).
+std::vector<double> NearestDistances(const std::vector<Eigen::Vector3d>& from,
+                                     const std::vector<Eigen::Vector3d>& to);
+
 // Mean of the two directed mean nearest-neighbour distances (m): the symmetric Chamfer distance.
 double ChamferDistance(const std::vector<Eigen::Vector3d>& a,
                        const std::vector<Eigen::Vector3d>& b);

@@ -4,6 +4,7 @@
 #include <open3d/Open3D.h>
 #include <unistd.h>
 
+#include "real2sim/mesh.h"
 #include "reality/proxy_reality.h"
 #include "reality/scan.h"
 #include "sim/camera.h"
@@ -55,17 +56,12 @@ TEST(ScanLayout, Open3dReadsAndFusesIt) {
   const sim::Workspace everywhere{Eigen::Vector3f::Constant(-10), Eigen::Vector3f::Constant(10)};
   const int n = sampler.Transform(m, proxy.hidden_env().data(), proxy.hidden_env().base(),
                                   everywhere, samples.data());
-  open3d::geometry::PointCloud truth;
+  std::vector<Eigen::Vector3d> truth, above_floor;
   for (int i = 0; i < n; ++i)
-    truth.points_.emplace_back(samples[3 * i], samples[3 * i + 1], samples[3 * i + 2]);
-  open3d::geometry::KDTreeFlann tree(truth);
-  std::vector<double> distances;
-  std::vector<int> index(1);
-  std::vector<double> d2(1);
-  for (const auto& p : fused->points_) {
-    if (p.z() < 0.01) continue;  // the floor plane is not sampled
-    if (tree.SearchKNN(p, 1, index, d2) == 1) distances.push_back(std::sqrt(d2[0]));
-  }
+    truth.emplace_back(samples[3 * i], samples[3 * i + 1], samples[3 * i + 2]);
+  for (const auto& p : fused->points_)
+    if (p.z() >= 0.01) above_floor.push_back(p);  // the floor plane is not sampled
+  std::vector<double> distances = NearestDistances(above_floor, truth);
   ASSERT_GT(distances.size(), 2000u);
   std::sort(distances.begin(), distances.end());
   const double median = distances[distances.size() / 2];

@@ -43,8 +43,7 @@ inline core::Scan SyntheticScan(const std::filesystem::path& dir, const std::str
     for (std::size_t p = 0; p < n; ++p)
       mm[p] = depth[p] > 0 ? uint16_t(std::lround(1000 * (depth[p] + 0.001 * rng.Normal()))) : 0;
     core::ScanFrameInfo info;
-    const auto& k = camera.intrinsics;
-    info.intrinsics = {k.width, k.height, k.fx, k.fy, k.cx, k.cy};
+    info.intrinsics = camera.intrinsics;
     info.camera_to_base = camera.pose;
     std::copy(robot.home.begin(), robot.home.end(), info.joint_positions.begin());
     info.gripper_width = 0.08;

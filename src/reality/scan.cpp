@@ -64,10 +64,9 @@ core::Scan CaptureScan(Robot& robot, const std::vector<core::Pose>& path,
   for (const core::Pose& pose : path) {
     const Observation o = robot.Observe(false);
     const RgbdFrame frame = robot.Capture({pose, intrinsics});
-    const auto& k = frame.intrinsics;
     core::ScanFrameInfo f;
     f.stamp = frame.stamp;
-    f.intrinsics = {k.width, k.height, k.fx, k.fy, k.cx, k.cy};
+    f.intrinsics = frame.intrinsics;
     f.camera_to_base = frame.extrinsics;
     std::copy(o.q.data(), o.q.data() + sim::kArmDof, f.joint_positions.begin());
     f.gripper_width = o.gripper_width;

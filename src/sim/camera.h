@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "core/pinhole.h"
 #include "core/rng.h"
 #include "core/se3.h"
 #include "sim/geom_scene.h"
@@ -18,11 +19,7 @@
 
 namespace twinforge::sim {
 
-struct CameraIntrinsics {
-  int width = 80, height = 60;
-  double fx = 0, fy = 0, cx = 0, cy = 0;
-  bool operator==(const CameraIntrinsics&) const = default;
-};
+using CameraIntrinsics = core::PinholeIntrinsics;
 
 // A pinhole camera; `pose` maps camera coordinates (OpenCV: x right, y down, z forward) to the
 // robot base frame.
