@@ -96,7 +96,8 @@ OperatorInput KeyToInput(int key, sim::ActionMode mode, double& gripper) {
   // Continuous: a full step along one axis; the gripper command latches like a discrete one.
   std::array<double, sim::kContinuousActionDim> v{};
   if (index >= 12) gripper = index == 13 ? 1.0 : -1.0;
-  if (index < 12) v[index / 2] = (index % 2 == 0 ? 1.0 : -1.0) * 1e3;  // clipped to the limit
+  if (index < 12)
+    v[index / 2] = index % 2 == 0 ? 1.0 : -1.0;  // one full step, in units of the limits
   v[6] = gripper;
   in.action = sim::Action::Continuous(v);
   return in;
@@ -152,8 +153,7 @@ OperatorInput KeyboardOperator::Next(const Observation&) {
   }
   if (in.kind == OperatorInput::Kind::kAction && in.action.mode == sim::ActionMode::kContinuous)
     for (int k = 0; k < 6; ++k)
-      in.action.value[k] = std::clamp(in.action.value[k], -1.0, 1.0) *
-                           (k < 3 ? limits_.translation : limits_.rotation);
+      in.action.value[k] *= k < 3 ? limits_.translation : limits_.rotation;
   return in;
 }
 

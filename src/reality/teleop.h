@@ -111,6 +111,7 @@ class KeyboardOperator : public Operator {
 };
 
 // The input a key stands for (KeyboardOperator's map); kIdle for keys that mean nothing.
+// Continuous moves are +-1 on one axis, in steps (KeyboardOperator scales them by its limits).
 OperatorInput KeyToInput(int key, sim::ActionMode mode, double& gripper);
 
 }  // namespace twinforge::reality
