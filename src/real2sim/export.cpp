@@ -6,23 +6,18 @@
 
 #include "core/error.h"
 #include "core/fs.h"
+#include "sim/mjcf.h"
 
 namespace twinforge::real2sim {
 
 namespace {
 
-std::string Vec(const Eigen::Vector3d& v) {
-  std::ostringstream s;
-  s.precision(6);
-  s << v.x() << " " << v.y() << " " << v.z();
-  return s.str();
-}
+std::string Vec(const Eigen::Vector3d& v) { return sim::FormatNumbers(v.data(), 3); }
 
 std::string Quat(const core::Quat& q) {
-  std::ostringstream s;
-  s.precision(9);
-  s << q.w() << " " << q.x() << " " << q.y() << " " << q.z();
-  return s.str();
+  double wxyz[4];
+  core::QuatToMj(q, wxyz);
+  return sim::FormatNumbers(wxyz, 4);
 }
 
 // The yaw (about +z) whose frame gives the points the smallest footprint: furniture and objects

@@ -57,14 +57,14 @@ void CopySection(XMLDocument& out, XMLElement* into_root, XMLElement* from_root,
   }
 }
 
+}  // namespace
+
 std::string FormatNumbers(const double* v, int n) {
   std::ostringstream s;
   s.precision(17);
   for (int i = 0; i < n; ++i) s << (i ? " " : "") << v[i];
   return s.str();
 }
-
-}  // namespace
 
 std::string AssembleMjcf(const MjcfParts& parts) {
   XMLDocument robot, scene, out;

@@ -23,4 +23,7 @@ struct MjcfParts {
 // Throws ConfigError naming the file if either is not well-formed MJCF.
 std::string AssembleMjcf(const MjcfParts& parts);
 
+// "x y z ..." at full double precision, for MJCF attributes.
+std::string FormatNumbers(const double* v, int n);
+
 }  // namespace twinforge::sim
