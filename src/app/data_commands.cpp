@@ -36,8 +36,18 @@ struct ScanCli {
   RealityCli reality;
   std::string task = "open_drawer";
   std::string out;
+  bool operate_first = false;
   reality::ScanOptions scan;
 };
+
+// `auto`: the robot's own operator if it has one, else a person at this terminal.
+std::unique_ptr<reality::Operator> MakeOperator(reality::Robot& robot, const std::string& mode,
+                                                const sim::TaskSpec& task) {
+  if (mode == "scripted" || (mode == "auto" && robot.Info().has_operator))
+    return std::make_unique<reality::RobotOperator>(robot);
+  return std::make_unique<reality::KeyboardOperator>(STDIN_FILENO, stderr, task.control.action,
+                                                     task.control.limits);
+}
 
 }  // namespace
 
@@ -74,13 +84,7 @@ void AddDataCommands(CLI::App& parent, int& exit_code) {
     const sim::TaskSpec task = sim::LoadTaskSpec(o.task);
     reality::RealityConnection connection(o.reality.Options());
     reality::Robot& robot = connection.robot();
-    std::unique_ptr<reality::Operator> op;
-    const bool scripted = o.op == "scripted" || (o.op == "auto" && robot.Info().has_operator);
-    if (scripted)
-      op = std::make_unique<reality::RobotOperator>(robot);
-    else
-      op = std::make_unique<reality::KeyboardOperator>(STDIN_FILENO, stderr, task.control.action,
-                                                       task.control.limits);
+    const auto op = MakeOperator(robot, o.op, task);
     spdlog::info("demos: recording {} demos of {} on {} with the {}", o.record.demos, task.name,
                  robot.Info().name, op->name());
     core::Progress progress("demos", o.record.demos, "demos");
@@ -138,10 +142,18 @@ void AddDataCommands(CLI::App& parent, int& exit_code) {
       ->check(CLI::PositiveNumber);
   capture->add_option("--elevations", scan_cli->scan.elevations_deg, "ring elevations, degrees");
   capture->add_option("--radius", scan_cli->scan.radius, "m from the scene centre (0: auto)");
+  capture->add_flag("--operate-first", scan_cli->operate_first,
+                    "let the operator change the scene first (open the drawer), then send the arm "
+                    "home and scan: the second state for `twin build --scan-after`");
   capture->callback([scan_cli, &exit_code] {
     auto& o = *scan_cli;
     const sim::TaskSpec task = sim::LoadTaskSpec(o.task);
     reality::RealityConnection connection(o.reality.Options());
+    if (o.operate_first) {
+      const auto op = MakeOperator(connection.robot(), "auto", task);
+      spdlog::info("scan: the {} changes the scene first", op->name());
+      reality::OperateThenHome(connection.robot(), *op, task);
+    }
     const auto path = reality::ScanPath(task, o.scan);
     core::Progress progress("scan", static_cast<int64_t>(path.size()), "frames");
     const core::Scan result = reality::CaptureScan(

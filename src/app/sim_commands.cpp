@@ -79,12 +79,32 @@ void AddSimCommands(CLI::App& parent, int& exit_code) {
       const int step = expert.current_step();
       const sim::StepResult r = env.Step(action);
       env.State(state.data());
+      // What the robot touches (a twin's collision boxes are where experts get stuck).
+      const mjModel* m = env.model();
+      const mjData* d = env.data();
+      std::vector<std::string> touches;
+      for (int c = 0; c < d->ncon; ++c) {
+        const int g1 = d->contact[c].geom1, g2 = d->contact[c].geom2;
+        const bool r1 = m->geom_group[g1] == sim::kRobotGeomGroup,
+                   r2 = m->geom_group[g2] == sim::kRobotGeomGroup;
+        if (r1 == r2 && !std::getenv("TWINFORGE_TRACE_ALL_CONTACTS")) continue;
+        auto name = [m](int g) {
+          const char* n = mj_id2name(m, mjOBJ_GEOM, g);
+          return n ? std::string(n) : "geom " + std::to_string(g);
+        };
+        touches.push_back(r1 ? name(g1) + "/" + name(g2) : name(g2) + "/" + name(g1));
+      }
+      core::Json joints = core::Json::object();
+      for (int j : task->index().state_joints)
+        joints[mj_id2name(m, mjOBJ_JOINT, j)] = d->qpos[m->jnt_qposadr[j]];
       core::Json line = {{"t", t},
                          {"expert_step", step},
                          {"action", action.mode == sim::ActionMode::kDiscrete
                                         ? core::Json(sim::DiscreteActionName(action.index))
                                         : core::Json(action.value)},
                          {"state", state},
+                         {"joints", joints},
+                         {"robot_contacts", touches},
                          {"success", r.success}};
       std::cout << line.dump() << "\n";
       if (r.success || r.done) break;

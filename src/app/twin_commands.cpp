@@ -3,15 +3,22 @@
 #include <iostream>
 #include <memory>
 
+#include "pipeline/twin_score.h"
 #include "real2sim/build.h"
+#include "reality/proxy_reality.h"
 
 namespace twinforge::app {
 
 namespace {
 
 struct BuildCli {
-  std::string scan, out, spec;
+  std::string scan, out, spec, scan_after, task;
   real2sim::BuildOptions options;
+};
+
+struct ScoreCli {
+  std::string twin, world;
+  pipeline::TwinScoreOptions options;
 };
 
 }  // namespace
@@ -28,6 +35,14 @@ void AddTwinCommands(CLI::App& parent, int& exit_code) {
   build->add_option("--out", cli->out, "twin directory to write")->required();
   build->add_option("--spec", cli->spec, "an edited twin.yaml to use instead of proposing one")
       ->check(CLI::ExistingFile);
+  build
+      ->add_option("--scan-after", cli->scan_after,
+                   "a second scan with a part moved (scan capture --operate-first): adds the "
+                   "part and its joint")
+      ->check(CLI::ExistingDirectory);
+  build->add_option("--task", cli->task,
+                    "the task the twin is for (built-in name or task.yaml): its twin recipe names "
+                    "parts, joints and sites, and task.yaml is written into the twin");
   build->add_option("--voxel", cli->options.fusion.voxel, "TSDF voxel (m)")
       ->check(CLI::Range(0.001, 0.05));
   build
@@ -36,10 +51,29 @@ void AddTwinCommands(CLI::App& parent, int& exit_code) {
       ->check(CLI::PositiveNumber);
   build->callback([cli, &exit_code] {
     if (!cli->spec.empty()) cli->options.spec = cli->spec;
+    if (!cli->scan_after.empty()) cli->options.scan_after = cli->scan_after;
+    if (!cli->task.empty()) cli->options.task = sim::LoadTaskSpec(cli->task);
     core::Progress progress("fusion", 0, "frames");
     const auto report = real2sim::BuildTwin(cli->scan, cli->out, cli->options, &progress);
     progress.Finish();
     std::cout << report.dump(2) << "\n";
+    exit_code = 0;
+  });
+
+  auto score_cli = std::make_shared<ScoreCli>();
+  auto* score = twin->add_subcommand(
+      "score",
+      "grade a built twin against the proxy world it was scanned from (reads the hidden world: "
+      "a grader, never part of the pipeline)");
+  score->add_option("--twin", score_cli->twin, "twin directory (twin build --out)")
+      ->required()
+      ->check(CLI::ExistingDirectory);
+  score->add_option("--world", score_cli->world, "proxy world (built-in name or directory)")
+      ->required();
+  score->callback([score_cli, &exit_code] {
+    const auto result = pipeline::ScoreTwin(
+        score_cli->twin, reality::ResolveWorldDir(score_cli->world), score_cli->options);
+    std::cout << result.ToJson().dump(2) << "\n";
     exit_code = 0;
   });
 }

@@ -3,6 +3,7 @@
 #include <open3d/Open3D.h>
 
 #include <Eigen/Geometry>
+#include <map>
 
 #include "core/error.h"
 
@@ -20,10 +21,69 @@ std::vector<Eigen::Vector3d> Changed(const std::vector<Eigen::Vector3d>& from,
   return out;
 }
 
+// The largest cluster (DBSCAN, `eps`): a moved part is one piece; scattered noise is not.
+std::vector<Eigen::Vector3d> LargestCluster(const std::vector<Eigen::Vector3d>& points,
+                                            double eps) {
+  if (points.empty()) return points;
+  open3d::geometry::PointCloud cloud;
+  cloud.points_ = points;
+  const std::vector<int> labels = cloud.ClusterDBSCAN(eps, 4, /*print_progress=*/false);
+  std::map<int, int> counts;
+  for (int l : labels)
+    if (l >= 0) ++counts[l];
+  int best = -1, most = 0;
+  for (const auto& [label, n] : counts)
+    if (n > most) {
+      most = n;
+      best = label;
+    }
+  std::vector<Eigen::Vector3d> out;
+  for (std::size_t i = 0; i < points.size(); ++i)
+    if (labels[i] == best) out.push_back(points[i]);
+  return out;
+}
+
 Eigen::Vector3d Centroid(const std::vector<Eigen::Vector3d>& points) {
   Eigen::Vector3d c = Eigen::Vector3d::Zero();
   for (const auto& p : points) c += p;
   return c / double(points.size());
+}
+
+struct Fit {
+  Eigen::Vector3d shift = Eigen::Vector3d::Zero();
+  double fitness = 0, rmse = 1e300;
+};
+
+// ICP restricted to translations (a slide): nearest neighbours within `reach`, then the mean
+// offset, until it settles.
+Fit FitTranslation(const std::vector<Eigen::Vector3d>& source,
+                   const open3d::geometry::KDTreeFlann& tree,
+                   const std::vector<Eigen::Vector3d>& target, Eigen::Vector3d shift,
+                   double reach) {
+  Fit fit;
+  std::vector<int> index(1);
+  std::vector<double> d2(1);
+  for (int iteration = 0; iteration < 60; ++iteration) {
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    double squares = 0;
+    int matched = 0;
+    for (const auto& p : source) {
+      const Eigen::Vector3d q = p + shift;
+      if (tree.SearchHybrid(q, reach, 1, index, d2) > 0) {
+        sum += target[index[0]] - q;
+        squares += d2[0];
+        ++matched;
+      }
+    }
+    if (matched == 0) return fit;
+    fit.shift = shift;
+    fit.fitness = double(matched) / double(source.size());
+    fit.rmse = std::sqrt(squares / matched);
+    const Eigen::Vector3d step = sum / matched;
+    shift += step;
+    if (step.norm() < 1e-6) break;
+  }
+  return fit;
 }
 
 }  // namespace
@@ -40,8 +100,8 @@ ArticulationEstimate EstimateArticulation(const std::vector<Eigen::Vector3d>& be
     return cloud.VoxelDownSample(voxel)->points_;
   };
   const std::vector<Eigen::Vector3d> first = thin(before), second = thin(after);
-  e.moved_before = Changed(first, second, options.changed);
-  e.moved_after = Changed(second, first, options.changed);
+  e.moved_before = LargestCluster(Changed(first, second, options.changed), 2 * voxel);
+  e.moved_after = LargestCluster(Changed(second, first, options.changed), 2 * voxel);
   if (static_cast<int>(e.moved_before.size()) < options.min_points ||
       static_cast<int>(e.moved_after.size()) < options.min_points)
     throw core::Error("articulation: only " + std::to_string(e.moved_before.size()) + " / " +
@@ -84,13 +144,28 @@ ArticulationEstimate EstimateArticulation(const std::vector<Eigen::Vector3d>& be
   e.motion = core::Pose::FromMatrix(best.transformation_);
   const Eigen::AngleAxisd rotation(e.motion.rotation);
   const Eigen::Vector3d t = e.motion.translation;
-  if (std::abs(rotation.angle()) < options.prismatic_below) {
-    // A slide: the moved points' displacement, whatever small rotation ICP left in.
-    const Eigen::Vector3d shift = e.motion * from - from;
+  // The slide that fits best, from where the rigid fit puts the moved points and from the
+  // centroids' offset. A flat front fits almost as well turned a little in its own plane, so
+  // a slide wins unless turning fits clearly better or turns far.
+  const open3d::geometry::KDTreeFlann tree(target);
+  Fit slide = FitTranslation(e.moved_before, tree, second, e.motion * from - from,
+                             options.max_correspondence);
+  const Fit other =
+      FitTranslation(e.moved_before, tree, second, to - from, options.max_correspondence);
+  if (other.fitness > slide.fitness + 0.02 ||
+      (other.fitness > slide.fitness - 0.02 && other.rmse < slide.rmse))
+    slide = other;
+  const bool turns_far = std::abs(rotation.angle()) > options.slide_up_to;
+  const bool turn_fits_better =
+      e.fitness > slide.fitness + 0.05 || e.rmse < options.turn_rmse_ratio * slide.rmse;
+  if (std::abs(rotation.angle()) < options.prismatic_below || (!turns_far && !turn_fits_better)) {
     e.type = JointType::kPrismatic;
-    e.amount = shift.norm();
-    e.axis = shift.normalized();
+    e.amount = slide.shift.norm();
+    e.axis = slide.shift.normalized();
     e.origin = from;
+    e.fitness = slide.fitness;
+    e.rmse = slide.rmse;
+    e.motion = core::Pose{slide.shift, core::Quat::Identity()};
     return e;
   }
   e.type = JointType::kRevolute;
@@ -107,6 +182,34 @@ ArticulationEstimate EstimateArticulation(const std::vector<Eigen::Vector3d>& be
   c += e.axis * e.axis.dot(from - c);
   e.origin = c;
   return e;
+}
+
+double SnapToFrame(ArticulationEstimate& e, const std::vector<Eigen::Vector3d>& frame,
+                   double max_angle) {
+  const core::Quat yaw = core::Yaw(UprightYaw(frame));
+  Eigen::Vector3d best = e.axis;
+  double best_angle = max_angle;
+  bool found = false;
+  for (int i = 0; i < 3; ++i)
+    for (double sign : {1.0, -1.0}) {
+      const Eigen::Vector3d a = sign * (yaw * Eigen::Vector3d::Unit(i));
+      const double angle = std::acos(std::clamp(a.dot(e.axis), -1.0, 1.0));
+      if (angle <= best_angle) {
+        best_angle = angle;
+        best = a;
+        found = true;
+      }
+    }
+  if (!found) return -1;
+  if (e.type == JointType::kPrismatic) {
+    e.amount = e.motion.translation.dot(best);
+    e.motion = core::Pose{best * e.amount, core::Quat::Identity()};
+  } else {
+    const core::Quat r(Eigen::AngleAxisd(e.amount, best));
+    e.motion = core::Pose{e.origin - r * e.origin, r};
+  }
+  e.axis = best;
+  return best_angle;
 }
 
 }  // namespace twinforge::real2sim

@@ -3,6 +3,7 @@
 #include "core/error.h"
 #include "core/fs.h"
 #include "core/log.h"
+#include "real2sim/recipe.h"
 #include "sim/robot.h"
 
 namespace twinforge::real2sim {
@@ -40,6 +41,7 @@ nlohmann::json BuildTwin(const std::filesystem::path& scan_dir, const std::files
     WriteMesh(out / "meshes" / "static.ply", segmentation.static_scene);
 
   TwinSpec spec;
+  nlohmann::json articulation;
   if (options.spec) {
     // An edited spec refers to meshes by path relative to itself; they are copied alongside.
     spec = LoadTwinSpec(*options.spec);
@@ -54,12 +56,49 @@ nlohmann::json BuildTwin(const std::filesystem::path& scan_dir, const std::files
     }
   } else {
     spec = ProposeSpec(segmentation, out.filename().string());
+    if (options.scan_after) {
+      const core::Scan after_scan = core::ReadScan(*options.scan_after);
+      const Fusion after = FuseScan(after_scan, robot, options.fusion, progress);
+      WriteMesh(out / "scan_after.ply", after.mesh);
+      // What stands on the table, in both states (the table's own edges differ by noise).
+      auto above = [&](const std::vector<Eigen::Vector3d>& points) {
+        std::vector<Eigen::Vector3d> out;
+        for (const auto& p : points)
+          if (fusion.support.Distance(p) > options.segment.min_height) out.push_back(p);
+        return out;
+      };
+      ArticulationEstimate e =
+          EstimateArticulation(above(fusion.points), above(after.points), options.articulation);
+      const MovingPart moving = FindMovingPart(segmentation, e, after.mesh);
+      AddMovingPart(spec, moving, e, moving.segment + "_moving", moving.segment + "_joint", out);
+      articulation = {{"segment", moving.segment},
+                      {"type", e.type == JointType::kRevolute ? "revolute" : "prismatic"},
+                      {"axis", {e.axis.x(), e.axis.y(), e.axis.z()}},
+                      {"origin", {e.origin.x(), e.origin.y(), e.origin.z()}},
+                      {"amount", e.amount},
+                      {"fitness", e.fitness},
+                      {"rmse", e.rmse},
+                      {"moved_points", {e.moved_before.size(), e.moved_after.size()}}};
+      spdlog::info("twin: {} moves in {}: {} by {:.3f}, fitness {:.2f}", moving.segment + "_moving",
+                   moving.segment, articulation["type"].get<std::string>(), e.amount, e.fitness);
+    }
+    if (options.task) ApplyRecipe(spec, options.task->twin, out, options.task->file.string());
   }
   SaveTwinSpec(out / "twin.yaml", spec);
-  const ExportReport exported = ExportMjcf(spec, out, options.export_options);
+  ExportOptions export_options = options.export_options;
+  for (std::size_t i = 0; i < scan.frames.size(); ++i) {
+    const auto& f = scan.frames[i];
+    char name[32];
+    std::snprintf(name, sizeof(name), "scan_%02zu", i);
+    export_options.cameras.push_back(
+        {name, f.camera_to_base,
+         2 * std::atan(0.5 * f.intrinsics.height / f.intrinsics.fy) * 180 / M_PI});
+  }
+  const ExportReport exported = ExportMjcf(spec, out, export_options);
+  if (options.task) WriteTwinTask(*options.task, out);
 
   nlohmann::json report = {
-      {"scan", scan_dir.string()},
+      {"scan", std::filesystem::absolute(scan_dir).lexically_normal().string()},
       {"frames", scan.frames.size()},
       {"robot_pixels_removed", fusion.robot_pixels},
       {"fused_triangles", fusion.mesh.triangles.size()},
@@ -68,7 +107,8 @@ nlohmann::json BuildTwin(const std::filesystem::path& scan_dir, const std::files
          {fusion.support.normal.x(), fusion.support.normal.y(), fusion.support.normal.z()}},
         {"offset", fusion.support.offset}}},
       {"scene", exported.scene.string()},
-      {"collision_boxes", exported.boxes}};
+      {"collision_boxes", exported.boxes},
+      {"collision_voxel", exported.voxel}};
   nlohmann::json segments = nlohmann::json::array();
   for (const auto& s : segmentation.segments)
     segments.push_back({{"name", s.name},
@@ -78,6 +118,8 @@ nlohmann::json BuildTwin(const std::filesystem::path& scan_dir, const std::files
                         {"min", {s.min.x(), s.min.y(), s.min.z()}},
                         {"max", {s.max.x(), s.max.y(), s.max.z()}}});
   report["segments"] = segments;
+  if (!articulation.is_null()) report["articulation"] = articulation;
+  if (options.task) report["task"] = (out / "task.yaml").string();
   core::WriteFileAtomic(out / "build.json", report.dump(2));
   spdlog::info("twin: {} segments, scene {}", segmentation.segments.size(),
                exported.scene.string());

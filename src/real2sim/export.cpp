@@ -20,29 +20,6 @@ std::string Quat(const core::Quat& q) {
   return sim::FormatNumbers(wxyz, 4);
 }
 
-// The yaw (about +z) whose frame gives the points the smallest footprint: furniture and objects
-// stand upright on the table, so their faces line up with this frame.
-double UprightYaw(const std::vector<Eigen::Vector3d>& points) {
-  double best_yaw = 0, best_area = 1e300;
-  const std::size_t stride = std::max<std::size_t>(1, points.size() / 3000);
-  for (int deg = 0; deg < 90; ++deg) {
-    const double yaw = deg * M_PI / 180, c = std::cos(yaw), s = std::sin(yaw);
-    Eigen::Vector2d lo = Eigen::Vector2d::Constant(1e300), hi = -lo;
-    for (std::size_t i = 0; i < points.size(); i += stride) {
-      const Eigen::Vector2d p(c * points[i].x() + s * points[i].y(),
-                              -s * points[i].x() + c * points[i].y());
-      lo = lo.cwiseMin(p);
-      hi = hi.cwiseMax(p);
-    }
-    const double area = (hi - lo).prod();
-    if (area < best_area - 1e-12) {
-      best_area = area;
-      best_yaw = yaw;
-    }
-  }
-  return best_yaw;
-}
-
 struct Body {
   const PartSpec* part = nullptr;
   Mesh mesh;                                       // base frame
@@ -57,8 +34,11 @@ struct Body {
 
 namespace {
 
-// Greedy merge of the occupied voxels of `points` into boxes, each shrunk to its points.
-std::vector<AlignedBox> MergeVoxels(const std::vector<Eigen::Vector3d>& points, double voxel) {
+// Greedy merge of the occupied voxels of `points` into boxes, each shrunk to its points. No box
+// spans more than one layer of cells along `flat` (the normal of the faces being covered, so
+// that faces at different depths, a handle in front of a drawer, stay apart).
+std::vector<AlignedBox> MergeVoxels(const std::vector<Eigen::Vector3d>& points, double voxel,
+                                    int flat) {
   std::vector<AlignedBox> boxes;
   if (points.empty()) return boxes;
   Eigen::Vector3d lo = points.front(), hi = lo;
@@ -84,12 +64,12 @@ std::vector<AlignedBox> MergeVoxels(const std::vector<Eigen::Vector3d>& points, 
       for (int x = 0; x < n.x(); ++x) {
         if (!free_cell(x, y, z)) continue;
         int x1 = x + 1;
-        while (x1 < n.x() && free_cell(x1, y, z)) ++x1;
+        while (flat != 0 && x1 < n.x() && free_cell(x1, y, z)) ++x1;
         int y1 = y + 1;
-        for (bool grow = true; grow && y1 < n.y(); grow && ++y1)
+        for (bool grow = flat != 1; grow && y1 < n.y(); grow && ++y1)
           for (int xx = x; xx < x1 && grow; ++xx) grow = free_cell(xx, y1, z);
         int z1 = z + 1;
-        for (bool grow = true; grow && z1 < n.z(); grow && ++z1)
+        for (bool grow = flat != 2; grow && z1 < n.z(); grow && ++z1)
           for (int yy = y; yy < y1 && grow; ++yy)
             for (int xx = x; xx < x1 && grow; ++xx) grow = free_cell(xx, yy, z1);
         for (int zz = z; zz < z1; ++zz)
@@ -123,7 +103,7 @@ std::vector<AlignedBox> CoverWithBoxes(const std::vector<Eigen::Vector3d>& point
         normals[i].cwiseAbs().maxCoeff(&dominant);
         if (dominant == axis && (normals[i][axis] > 0) == (sign > 0)) group.push_back(points[i]);
       }
-      for (AlignedBox box : MergeVoxels(group, voxel)) {
+      for (AlignedBox box : MergeVoxels(group, voxel, axis)) {
         // The face is the box's outer side; the solid is behind it.
         box.centre[axis] -= sign * 0.5 * thickness;
         box.half[axis] += 0.5 * thickness;
@@ -175,6 +155,19 @@ ExportReport ExportMjcf(const TwinSpec& spec, const std::filesystem::path& twin_
       b.boxes = CoverWithBoxes(points, normals, voxel);
       report.voxel[b.part->name] = voxel;
       if (static_cast<int>(b.boxes.size()) <= options.max_boxes) break;
+      if (voxel * 1.25 > options.max_collision_voxel) {
+        // A scanned surface has specks no coarser grid gets rid of: keep the largest faces.
+        std::sort(b.boxes.begin(), b.boxes.end(), [](const AlignedBox& x, const AlignedBox& y) {
+          auto face = [](const AlignedBox& box) {
+            Eigen::Vector3d h = box.half;
+            std::sort(h.data(), h.data() + 3);
+            return h[1] * h[2];
+          };
+          return face(x) > face(y);
+        });
+        b.boxes.resize(options.max_boxes);
+        break;
+      }
     }
     report.boxes[b.part->name] = static_cast<int>(b.boxes.size());
     // The visual mesh, in the body frame.
@@ -247,6 +240,14 @@ ExportReport ExportMjcf(const TwinSpec& spec, const std::filesystem::path& twin_
     }
     xml << pad << "  <geom name=\"" << p.name << "_visual\" class=\"twin_visual\" mesh=\"" << p.name
         << "_visual\" rgba=\"" << Vec(colour) << " 1\"/>\n";
+    for (std::size_t k = 0; k < p.boxes.size(); ++k) {
+      const core::Pose box = b.pose.Inverse() * p.boxes[k].pose();
+      const Eigen::Vector3d half = 0.5 * Eigen::Vector3d(p.boxes[k].size.data());
+      xml << pad << "  <geom name=\"" << p.name << "_box" << k
+          << "\" class=\"twin_collision\" pos=\"" << Vec(box.translation) << "\" quat=\""
+          << Quat(box.rotation) << "\" size=\"" << Vec(half) << "\" rgba=\"" << Vec(colour)
+          << " 1\" group=\"2\" friction=\"" << p.friction << " 0.005 0.0001\"/>\n";
+    }
     for (std::size_t k = 0; k < b.boxes.size(); ++k)
       xml << pad << "  <geom name=\"" << p.name << "_c" << k << "\" class=\"twin_collision\" pos=\""
           << Vec(b.boxes[k].centre) << "\" size=\"" << Vec(b.boxes[k].half) << "\" friction=\""
@@ -254,18 +255,37 @@ ExportReport ExportMjcf(const TwinSpec& spec, const std::filesystem::path& twin_
     for (const auto& s : spec.sites)
       if (s.part == p.name)
         xml << pad << "  <site name=\"" << s.name << "\" pos=\""
-            << Vec(b.pose.Inverse() * Eigen::Vector3d(s.position.data()))
+            << Vec(b.pose.Inverse() * Eigen::Vector3d(s.position.data())) << "\" quat=\""
+            << Quat(b.pose.rotation.inverse() * core::Yaw(s.yaw))
             << "\" size=\"0.01\" group=\"5\"/>\n";
     for (int c : b.children) emit(c, b.pose, depth + 1);
     xml << pad << "</body>\n";
   };
   for (std::size_t i = 0; i < bodies.size(); ++i)
     if (!bodies[i].joint || bodies[i].joint->parent == "world") emit(int(i), core::Pose{}, 2);
+  for (const auto& c : options.cameras) {
+    // MuJoCo's cameras look along their -z with y up; OpenCV's along +z with y down.
+    const core::Quat q = c.pose.rotation * core::Quat(0, 1, 0, 0);
+    xml << "    <camera name=\"" << c.name << "\" pos=\"" << Vec(c.pose.translation) << "\" quat=\""
+        << Quat(q) << "\" fovy=\"" << c.fovy_deg << "\"/>\n";
+  }
   for (const auto& s : spec.sites)
     if (s.part == "world")
       xml << "    <site name=\"" << s.name << "\" pos=\"" << Vec(Eigen::Vector3d(s.position.data()))
-          << "\" size=\"0.01\" group=\"5\"/>\n";
-  xml << "  </worldbody>\n</mujoco>\n";
+          << "\" quat=\"" << Quat(core::Yaw(s.yaw)) << "\" size=\"0.01\" group=\"5\"/>\n";
+  xml << "  </worldbody>\n";
+  // A jointed part and its parent never collide: their scanned surfaces touch where a real
+  // drawer has a few mm of play, and the joint's range is what stops it. (MuJoCo's own
+  // parent-child filter skips a parent welded to the world, as furniture is.)
+  bool any = false;
+  for (const auto& j : spec.joints) {
+    if (j.parent == "world") continue;
+    xml << (any ? "" : "  <contact>\n") << "    <exclude body1=\"" << j.parent << "\" body2=\""
+        << j.child << "\"/>\n";
+    any = true;
+  }
+  if (any) xml << "  </contact>\n";
+  xml << "</mujoco>\n";
   report.scene = twin_dir / "scene.xml";
   core::WriteFileAtomic(report.scene, xml.str(), /*keep_backup=*/true);
   return report;

@@ -12,12 +12,21 @@
 
 namespace twinforge::real2sim {
 
+// A camera of the scene: where a scan frame (or the task's camera) was, OpenCV axes -> base.
+struct ExportCamera {
+  std::string name;
+  core::Pose pose;
+  double fovy_deg = 58;
+};
+
 struct ExportOptions {
-  double collision_voxel = 0.004;  // m, the boxes' grid: finer than the gaps parts slide in
-  int max_boxes = 64;              // per part; the grid coarsens until the part fits
-  double table_thickness = 0.02;   // m, the static table under the support plane
+  double collision_voxel = 0.004;     // m, the boxes' grid: finer than the gaps parts slide in
+  int max_boxes = 128;                // per part; the grid coarsens until the part fits, ...
+  double max_collision_voxel = 0.01;  // ... up to this, then the smallest boxes are dropped
+  double table_thickness = 0.02;      // m, the static table under the support plane
   std::array<double, 2> table_half{0.75, 0.85};  // m, table half-extents (x, y) ...
   std::array<double, 2> table_centre{0.45, 0};   // ... and centre, robot base frame
+  std::vector<ExportCamera> cameras;             // written as fixed cameras of the world
 };
 
 struct ExportReport {

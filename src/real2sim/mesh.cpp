@@ -113,4 +113,44 @@ double ChamferDistance(const std::vector<Eigen::Vector3d>& a,
   return 0.5 * (mean(NearestDistances(a, b)) + mean(NearestDistances(b, a)));
 }
 
+double UprightYaw(const std::vector<Eigen::Vector3d>& points) {
+  const std::size_t stride = std::max<std::size_t>(1, points.size() / 3000);
+  auto area = [&](double yaw) {
+    const double c = std::cos(yaw), s = std::sin(yaw);
+    Eigen::Vector2d lo = Eigen::Vector2d::Constant(1e300), hi = -lo;
+    for (std::size_t i = 0; i < points.size(); i += stride) {
+      const Eigen::Vector2d p(c * points[i].x() + s * points[i].y(),
+                              -s * points[i].x() + c * points[i].y());
+      lo = lo.cwiseMin(p);
+      hi = hi.cwiseMax(p);
+    }
+    return (hi - lo).prod();
+  };
+  // Whole degrees, then tenths around the best.
+  double best_yaw = 0, best_area = 1e300;
+  auto consider = [&](double deg) {
+    const double yaw = deg * M_PI / 180, a = area(yaw);
+    if (a < best_area - 1e-12) {
+      best_area = a;
+      best_yaw = yaw;
+    }
+  };
+  for (int deg = 0; deg < 90; ++deg) consider(deg);
+  const double coarse = best_yaw * 180 / M_PI;
+  for (int tenth = -9; tenth <= 9; ++tenth) consider(coarse + 0.1 * tenth);
+  return std::fmod(best_yaw + M_PI / 2, M_PI / 2);  // in [0, 90) deg
+}
+
+core::Pose AlignPoints(const std::vector<Eigen::Vector3d>& source,
+                       const std::vector<Eigen::Vector3d>& target, double reach) {
+  open3d::geometry::PointCloud a, b;
+  a.points_ = source;
+  b.points_ = target;
+  const auto result = open3d::pipelines::registration::RegistrationICP(
+      a, b, reach, Eigen::Matrix4d::Identity(),
+      open3d::pipelines::registration::TransformationEstimationPointToPoint(false),
+      open3d::pipelines::registration::ICPConvergenceCriteria(1e-8, 1e-8, 100));
+  return core::Pose::FromMatrix(result.transformation_);
+}
+
 }  // namespace twinforge::real2sim

@@ -6,6 +6,8 @@
 #include <filesystem>
 #include <vector>
 
+#include "core/se3.h"
+
 namespace twinforge::real2sim {
 
 struct Mesh {
@@ -65,5 +67,14 @@ std::vector<double> NearestDistances(const std::vector<Eigen::Vector3d>& from,
 // Mean of the two directed mean nearest-neighbour distances (m): the symmetric Chamfer distance.
 double ChamferDistance(const std::vector<Eigen::Vector3d>& a,
                        const std::vector<Eigen::Vector3d>& b);
+
+// The yaw (about +z, in [0, 90) deg) whose frame gives the points the smallest footprint:
+// furniture and objects stand upright on the table, so their faces line up with this frame.
+double UprightYaw(const std::vector<Eigen::Vector3d>& points);
+
+// The rigid motion (point-to-point ICP from the identity, correspondences within `reach` m)
+// that best moves `source` onto `target`.
+core::Pose AlignPoints(const std::vector<Eigen::Vector3d>& source,
+                       const std::vector<Eigen::Vector3d>& target, double reach);
 
 }  // namespace twinforge::real2sim

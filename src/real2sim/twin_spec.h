@@ -68,11 +68,15 @@ struct PartSpec {
   double mass = 0.5;  // kg
   double friction = 0.8;
   std::array<double, 4> rgba{0, 0, 0, 0};  // 0 alpha: vertex colours of the mesh
+  // Solid boxes added to the part (base frame), seen and collided with: what a scan shows
+  // poorly, e.g. a shiny handle bar the depth sensor lost.
+  std::vector<BoxSpec> boxes;
   template <class A>
   void Serialize(A& a) {
     a("name", name);
     a("mesh", mesh);
     a("cuts", cuts);
+    a("boxes", boxes);
     a("fixed", fixed);
     a("mass", mass);
     a("friction", friction);
@@ -119,11 +123,13 @@ struct SiteSpec {
   std::string name;
   std::string part;
   std::array<double, 3> position{0, 0, 0};  // base frame
+  double yaw = 0;  // rad about +z: where the site's x points (task steps read the site's frame)
   template <class A>
   void Serialize(A& a) {
     a("name", name);
     a("part", part);
     a("position", position);
+    a("yaw", yaw);
     a.Require(!name.empty(), "name", "a site name");
   }
 };

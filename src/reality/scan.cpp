@@ -3,7 +3,9 @@
 #include <cmath>
 
 #include "core/error.h"
+#include "core/log.h"
 #include "sim/camera.h"
+#include "sim/robot.h"
 
 namespace twinforge::reality {
 
@@ -74,6 +76,37 @@ core::Scan CaptureScan(Robot& robot, const std::vector<core::Pose>& path,
     if (progress) progress->Advance();
   }
   return writer.scan();
+}
+
+int OperateThenHome(Robot& robot, Operator& op, const sim::TaskSpec& task) {
+  const RobotInfo info = robot.Info();
+  ActionClient client(robot, task.control.limits);
+  Observation o = robot.Observe(false);
+  int actions = 0;
+  for (int idle = 0; actions < 3 * task.horizon && idle < 100000;) {
+    const OperatorInput in = op.Next(o);
+    if (in.kind == OperatorInput::Kind::kQuit || in.kind == OperatorInput::Kind::kDone) break;
+    if (in.kind == OperatorInput::Kind::kIdle) {
+      ++idle;
+      continue;
+    }
+    client.Act(in.action, o);
+    ++actions;
+    o = robot.Observe(false);
+  }
+  // Home in small joint steps (the safety filter's per-step limit is for actions; a straight
+  // interpolation in joint space keeps each step as small).
+  const sim::RobotSpec spec = sim::LoadRobotSpec(RobotDescriptionPath(info.robot));
+  const sim::ArmVector start = o.q, home(spec.home.data());
+  const int steps = 30;
+  for (int i = 1; i <= steps + 10; ++i) {
+    const double f = std::min(1.0, double(i) / steps);
+    robot.SendTargets({start + f * (home - start), spec.gripper_open, 0.0});
+  }
+  o = robot.Observe(false);
+  spdlog::info("scan: the operator sent {} actions; the arm is {:.3f} rad from home", actions,
+               (o.q - home).norm());
+  return actions;
 }
 
 }  // namespace twinforge::reality

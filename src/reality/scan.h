@@ -8,6 +8,7 @@
 #include "core/progress.h"
 #include "core/scan.h"
 #include "reality/robot.h"
+#include "reality/teleop.h"
 #include "sim/task.h"
 
 namespace twinforge::reality {
@@ -45,5 +46,11 @@ sim::CameraIntrinsics ScanIntrinsics(const ScanOptions& options);
 core::Scan CaptureScan(Robot& robot, const std::vector<core::Pose>& path,
                        const sim::CameraIntrinsics& intrinsics, const std::filesystem::path& out,
                        core::Progress* progress = nullptr);
+
+// The scene in a second state, for the articulation estimate (RialTo: scan, open the drawer,
+// scan again): the operator drives the robot from where it is, without a reset, until they say
+// done (or 3 x the task's horizon); then the arm goes back to its home pose with the gripper
+// open, so that it hides as little of the scene as it can. Returns the actions sent.
+int OperateThenHome(Robot& robot, Operator& op, const sim::TaskSpec& task);
 
 }  // namespace twinforge::reality

@@ -171,10 +171,10 @@ int DepthToPoints(const Camera& camera, const float* depth, const Workspace& wor
 }
 
 SurfaceSampler::SurfaceSampler(const mjModel* m, unsigned groups, double density, int min_per_geom,
-                               int max_per_geom) {
+                               int max_per_geom, const std::function<bool(int)>& keep) {
   core::Rng rng(0x5a3);
   for (int g = 0; g < m->ngeom; ++g) {
-    if (!(groups & (1u << m->geom_group[g]))) continue;
+    if (!(groups & (1u << m->geom_group[g])) || (keep && !keep(g))) continue;
     const int type = m->geom_type[g];
     const double* size = m->geom_size + 3 * g;
     if (type == mjGEOM_MESH) {

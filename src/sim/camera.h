@@ -8,6 +8,7 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include "core/pinhole.h"
@@ -84,9 +85,10 @@ int DepthToPoints(const Camera& camera, const float* depth, const Workspace& wor
 class SurfaceSampler {
  public:
   // Samples the geoms whose group is in `groups` (bit i = group i), area-weighted at `density`
-  // points per square metre, between `min_per_geom` and `max_per_geom` points each.
+  // points per square metre, between `min_per_geom` and `max_per_geom` points each; with
+  // `keep`, only the geoms it accepts.
   SurfaceSampler(const mjModel* m, unsigned groups, double density = 20000, int min_per_geom = 16,
-                 int max_per_geom = 4000);
+                 int max_per_geom = 4000, const std::function<bool(int)>& keep = nullptr);
 
   // Writes the base-frame points inside `workspace` to xyz (capacity: capacity() points) and
   // returns how many. Primitive sizes are read from the model, so resized geoms stay right.

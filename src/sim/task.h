@@ -237,6 +237,96 @@ struct CameraSpec {
   }
 };
 
+// How a twin rebuilt from a scan of the task's scene (`twin build --task`) gets the names this
+// file refers to: which scanned segment is which body, the joint a two-state scan finds, and
+// where each site goes. The task's author writes it once, as a person would in the twin editor;
+// it holds no geometry beyond rough sizes. See docs/twin.md.
+struct TwinPartRecipe {
+  std::string name;                     // the body name the task uses
+  std::array<double, 3> size{0, 0, 0};  // rough extent (m): the two horizontal ones, then height
+  bool fixed = false;                   // welded to the world (furniture), else a free body
+  double mass = 0;                      // kg (0: the build's guess)
+  double friction = 0;                  // (0: the build's default)
+  template <class A>
+  void Serialize(A& a) {
+    a("name", name);
+    a("size", size);
+    a("fixed", fixed);
+    a("mass", mass);
+    a("friction", friction);
+    a.Require(!name.empty(), "name", "a body name");
+    a.Require(size[0] > 0 && size[1] > 0 && size[2] > 0, "size",
+              "three positive extents in m (horizontal, horizontal, height)");
+    a.Require(mass >= 0 && friction >= 0, "mass", "a non-negative mass and friction");
+  }
+};
+
+// A part that moves between the two scans: cut out of `parent` and joined to it.
+struct TwinJointRecipe {
+  std::string name;                // the joint name the task uses
+  std::string part;                // the body name of the moving part
+  std::string parent;              // a part of `parts`
+  std::string type = "prismatic";  // prismatic | revolute (checked against the estimate)
+  double damping = 1, frictionloss = 0;
+  double mass = 0.5;  // kg of the moving part
+  template <class A>
+  void Serialize(A& a) {
+    a("name", name);
+    a("part", part);
+    a("parent", parent);
+    a("type", type);
+    a("damping", damping);
+    a("frictionloss", frictionloss);
+    a("mass", mass);
+    a.Require(!name.empty() && !part.empty() && !parent.empty(), "name",
+              "a joint name, its moving part and its parent");
+    a.Require(type == "prismatic" || type == "revolute", "type", "prismatic or revolute");
+    a.Require(mass > 0, "mass", "a positive mass in kg");
+  }
+};
+
+// A site on a part: at a point of the part's bounds (`box`: -1..1 per axis of the base frame,
+// e.g. [0, 0, 1] the middle of its top), or, with `handle`, on what sticks out of it (a moving
+// part's handle: the extreme of its surface along the way it opens; a free part's: the extreme
+// horizontally from its core), `inset` m back in; then moved by `offset` m. The site's x axis
+// (which the expert's steps are written in) points along the handle's direction, or along the
+// part's faces (its upright frame), turned by `turn_deg` about +z.
+struct TwinSiteRecipe {
+  std::string name, part;
+  bool handle = false;
+  std::array<double, 3> box{0, 0, 0};
+  double inset = 0;
+  std::array<double, 3> offset{0, 0, 0};
+  double turn_deg = 0;
+  // A solid box (x, y, z sizes in the site's frame, m) added at the site: a handle the scan
+  // shows poorly, as a person would add one in the editor. Zero: none.
+  std::array<double, 3> grip_box{0, 0, 0};
+  template <class A>
+  void Serialize(A& a) {
+    a("name", name);
+    a("part", part);
+    a("handle", handle);
+    a("box", box);
+    a("inset", inset);
+    a("offset", offset);
+    a("turn_deg", turn_deg);
+    a("grip_box", grip_box);
+    a.Require(!name.empty() && !part.empty(), "name", "a site name and its part");
+  }
+};
+
+struct TwinRecipe {
+  std::vector<TwinPartRecipe> parts;
+  std::vector<TwinJointRecipe> joints;
+  std::vector<TwinSiteRecipe> sites;
+  template <class A>
+  void Serialize(A& a) {
+    a("parts", parts);
+    a("joints", joints);
+    a("sites", sites);
+  }
+};
+
 struct WorkspaceSpec {
   std::array<double, 3> min{-0.3, -0.6, 0.02};
   std::array<double, 3> max{0.9, 0.6, 1.0};
@@ -279,6 +369,7 @@ struct TaskSpec {
   ExpertSpec expert;
   CameraSpec camera;
   WorkspaceSpec workspace;
+  TwinRecipe twin;
 
   std::filesystem::path file;  // where it was loaded from (not serialized)
 
@@ -298,6 +389,7 @@ struct TaskSpec {
     a("expert", expert);
     a("camera", camera);
     a("workspace", workspace);
+    a("twin", twin);
     a.Require(!name.empty(), "name", "a task name");
     a.Require(!scene.empty(), "scene", "the path of the scene MJCF");
     a.Require(horizon > 0, "horizon", "a positive number of control steps");

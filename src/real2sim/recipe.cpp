@@ -1,0 +1,332 @@
+#include "real2sim/recipe.h"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+
+#include "core/config.h"
+#include "core/error.h"
+#include "core/log.h"
+
+namespace twinforge::real2sim {
+
+namespace {
+
+Eigen::Vector3d Centroid(const std::vector<Eigen::Vector3d>& points) {
+  Eigen::Vector3d c = Eigen::Vector3d::Zero();
+  for (const auto& p : points) c += p;
+  return c / double(std::max<std::size_t>(1, points.size()));
+}
+
+// A frame whose x is `x` and whose z is as near +z as x allows.
+Eigen::Matrix3d FrameAlong(const Eigen::Vector3d& x) {
+  Eigen::Vector3d up = Eigen::Vector3d::UnitZ() - x.dot(Eigen::Vector3d::UnitZ()) * x;
+  if (up.norm() < 0.3) up = Eigen::Vector3d::UnitY() - x.dot(Eigen::Vector3d::UnitY()) * x;
+  Eigen::Matrix3d r;
+  r.col(0) = x;
+  r.col(2) = up.normalized();
+  r.col(1) = r.col(2).cross(r.col(0));
+  return r;
+}
+
+// The way the surface of a part joined by `joint` moves as the joint opens, near `at`.
+Eigen::Vector3d OpeningDirection(const JointSpec& joint, const Eigen::Vector3d& at) {
+  const Eigen::Vector3d axis = Eigen::Vector3d(joint.axis.data()).normalized();
+  if (joint.type != JointType::kRevolute) return axis;
+  const Eigen::Vector3d v = axis.cross(at - Eigen::Vector3d(joint.origin.data()));
+  return v.norm() > 1e-9 ? v.normalized() : Eigen::Vector3d::UnitX();
+}
+
+// Horizontal extents (larger first) and height of the points, in their upright frame.
+Eigen::Vector3d UprightSize(const std::vector<Eigen::Vector3d>& points) {
+  const core::Quat yaw = core::Yaw(UprightYaw(points));
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;
+  for (const auto& p : points) {
+    const Eigen::Vector3d q = yaw.inverse() * p;
+    lo = lo.cwiseMin(q);
+    hi = hi.cwiseMax(q);
+  }
+  const Eigen::Vector3d e = hi - lo;
+  return {std::max(e.x(), e.y()), std::min(e.x(), e.y()), e.z()};
+}
+
+void RenamePart(TwinSpec& spec, const std::string& from, const std::string& to) {
+  if (from == to) return;
+  for (auto& p : spec.parts)
+    if (p.name == from) p.name = to;
+  for (auto& j : spec.joints) {
+    if (j.parent == from) j.parent = to;
+    if (j.child == from) j.child = to;
+  }
+  for (auto& s : spec.sites)
+    if (s.part == from) s.part = to;
+}
+
+PartSpec* FindPart(TwinSpec& spec, const std::string& name) {
+  for (auto& p : spec.parts)
+    if (p.name == name) return &p;
+  return nullptr;
+}
+
+const JointSpec* JointOf(const TwinSpec& spec, const std::string& child) {
+  for (const auto& j : spec.joints)
+    if (j.child == child) return &j;
+  return nullptr;
+}
+
+}  // namespace
+
+MovingPart FindMovingPart(const Segmentation& first, ArticulationEstimate& e, const Mesh& second,
+                          double snap) {
+  MovingPart out;
+  // The segment holding most of what moved.
+  const Segment* segment = nullptr;
+  int best = 0;
+  for (const auto& s : first.segments) {
+    const auto d = NearestDistances(e.moved_before, s.points);
+    const int near =
+        static_cast<int>(std::count_if(d.begin(), d.end(), [](double v) { return v < 0.015; }));
+    if (near > best) {
+      best = near;
+      segment = &s;
+    }
+  }
+  if (!segment) throw core::Error("articulation: what moved between the scans lies in no segment");
+  out.segment = segment->name;
+  if (snap > 0) {
+    const double turned = SnapToFrame(e, segment->points, snap);
+    if (turned >= 0)
+      spdlog::info("twin: the joint axis lined up with {}'s faces (turned {:.2f} deg)",
+                   segment->name, turned * 180 / M_PI);
+  }
+  JointSpec joint;
+  joint.type = e.type;
+  joint.axis = {e.axis.x(), e.axis.y(), e.axis.z()};
+  joint.origin = {e.origin.x(), e.origin.y(), e.origin.z()};
+  out.opens = OpeningDirection(joint, Centroid(e.moved_before));
+  // The region, in a frame along the opening direction.
+  const Eigen::Matrix3d r = FrameAlong(out.opens);
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;
+  for (const auto& p : e.moved_before) {
+    lo = lo.cwiseMin(r.transpose() * p);
+    hi = hi.cwiseMax(r.transpose() * p);
+  }
+  lo.tail<2>().array() -= 0.004;
+  hi.tail<2>().array() += 0.004;
+  hi.x() += 0.005;
+  if (e.type == JointType::kPrismatic) {
+    // A tray reaches back into its carcass, short of the carcass's back.
+    double back = 1e300;
+    for (const auto& p : segment->points) back = std::min(back, (r.transpose() * p).x());
+    lo.x() = std::min(lo.x(), back + 0.012);
+  } else {
+    lo.x() -= 0.025;  // a door panel's thickness behind its front
+  }
+  const Eigen::Vector3d mid = r * (0.5 * (lo + hi)), size = hi - lo;
+  out.region.center = {mid.x(), mid.y(), mid.z()};
+  out.region.size = {size.x(), size.y(), size.z()};
+  const Eigen::Vector3d rpy = core::ToRollPitchYaw(core::Quat(r));
+  out.region.euler = {rpy.x(), rpy.y(), rpy.z()};
+  // Its surface in the second state, moved back to the first.
+  const core::Pose back = e.motion.Inverse();
+  out.mesh = KeepTriangles(second, [&](std::size_t t) {
+    const auto& tri = second.triangles[t];
+    const Eigen::Vector3d c =
+        (second.vertices[tri[0]] + second.vertices[tri[1]] + second.vertices[tri[2]]) / 3.0;
+    return out.region.Contains(back * c);
+  });
+  for (auto& v : out.mesh.vertices) v = back * v;
+  if (out.mesh.empty())
+    throw core::Error("articulation: the second scan has no surface where the part moved to");
+  return out;
+}
+
+void AddMovingPart(TwinSpec& spec, const MovingPart& moving, const ArticulationEstimate& e,
+                   const std::string& name, const std::string& joint,
+                   const std::filesystem::path& twin_dir) {
+  PartSpec* parent = FindPart(spec, moving.segment);
+  if (!parent)
+    throw core::Error("articulation: the spec has no part '" + moving.segment +
+                      "' to cut the moving part out of");
+  parent->cuts.push_back({CutOp::kSubtract, moving.region});
+  const std::string parent_name = parent->name;
+  // The carcass's depth along the opening, for the range guess.
+  const Mesh carcass = PartMesh(*parent, twin_dir);
+  double lo = 1e300, hi = -1e300;
+  for (const auto& v : carcass.vertices) {
+    lo = std::min(lo, v.dot(moving.opens));
+    hi = std::max(hi, v.dot(moving.opens));
+  }
+  PartSpec part;
+  part.name = name;
+  part.mesh = "meshes/" + name + ".ply";
+  part.mass = 0.5;
+  WriteMesh(twin_dir / part.mesh, moving.mesh);
+  spec.parts.push_back(part);
+
+  JointSpec j;
+  j.name = joint;
+  j.type = e.type;
+  j.parent = parent_name;
+  j.child = name;
+  j.axis = {e.axis.x(), e.axis.y(), e.axis.z()};
+  j.origin = {e.origin.x(), e.origin.y(), e.origin.z()};
+  // Drawers come out about three quarters of their carcass's depth; doors swing about a right
+  // angle. Never less than the scans showed.
+  const double guess = e.type == JointType::kPrismatic ? 0.75 * (hi - lo) : M_PI / 2;
+  j.range = {0, std::max(e.amount, guess)};
+  spec.joints.push_back(j);
+}
+
+void ApplyRecipe(TwinSpec& spec, const sim::TwinRecipe& recipe,
+                 const std::filesystem::path& twin_dir, const std::string& origin) {
+  // Parts: nearest size first, among the parts no joint moves.
+  std::vector<std::string> free;
+  std::map<std::string, Eigen::Vector3d> sizes;
+  for (const auto& p : spec.parts)
+    if (!JointOf(spec, p.name)) {
+      free.push_back(p.name);
+      sizes[p.name] = UprightSize(PartMesh(p, twin_dir).vertices);
+    }
+  std::vector<bool> done(recipe.parts.size(), false);
+  std::vector<std::string> claimed;
+  for (std::size_t round = 0; round < recipe.parts.size(); ++round) {
+    double best = 1e300;
+    std::size_t best_r = 0;
+    std::string best_part;
+    for (std::size_t r = 0; r < recipe.parts.size(); ++r) {
+      if (done[r]) continue;
+      const Eigen::Vector3d want(recipe.parts[r].size.data());
+      for (const auto& name : free) {
+        if (std::find(claimed.begin(), claimed.end(), name) != claimed.end()) continue;
+        const Eigen::Vector3d has = sizes[name].cwiseMax(1e-4);
+        const double cost = (has.array() / want.array()).log().abs().sum();
+        if (cost < best) {
+          best = cost;
+          best_r = r;
+          best_part = name;
+        }
+      }
+    }
+    if (best_part.empty()) {
+      for (std::size_t r = 0; r < recipe.parts.size(); ++r)
+        if (!done[r])
+          throw core::ConfigError(origin, "twin.parts[" + std::to_string(r) + "]",
+                                  "a segment of the scan for '" + recipe.parts[r].name +
+                                      "', but every segment is taken (" +
+                                      std::to_string(free.size()) + " found)");
+    }
+    const auto& want = recipe.parts[best_r];
+    const Eigen::Vector3d has = sizes[best_part];
+    if (best > 3 * std::log(1.5))
+      spdlog::warn("twin: '{}' ({:.3f} x {:.3f} x {:.3f} m) is the nearest to recipe part '{}'",
+                   best_part, has.x(), has.y(), has.z(), want.name);
+    spdlog::info("twin: {} is {} ({:.3f} x {:.3f} x {:.3f} m)", best_part, want.name, has.x(),
+                 has.y(), has.z());
+    done[best_r] = true;
+    claimed.push_back(want.name);
+    RenamePart(spec, best_part, want.name);
+    std::replace(free.begin(), free.end(), best_part, want.name);
+    sizes[want.name] = has;
+    PartSpec* part = FindPart(spec, want.name);
+    part->fixed = want.fixed;
+    if (want.mass > 0) part->mass = want.mass;
+    if (want.friction > 0) part->friction = want.friction;
+  }
+  // Joints: the one whose parent is the recipe's parent.
+  for (std::size_t i = 0; i < recipe.joints.size(); ++i) {
+    const auto& want = recipe.joints[i];
+    JointSpec* joint = nullptr;
+    for (auto& j : spec.joints)
+      if (j.parent == want.parent) joint = &j;
+    if (!joint)
+      throw core::ConfigError(origin, "twin.joints[" + std::to_string(i) + "]",
+                              "a part that moves in '" + want.parent +
+                                  "' between the two scans (build with --scan-after)");
+    const JointType type = want.type == "revolute" ? JointType::kRevolute : JointType::kPrismatic;
+    if (joint->type != type)
+      spdlog::warn("twin: the scans show a {} joint where the recipe expects {} for '{}'",
+                   joint->type == JointType::kRevolute ? "revolute" : "prismatic", want.type,
+                   want.name);
+    joint->name = want.name;
+    joint->damping = want.damping;
+    joint->frictionloss = want.frictionloss;
+    const std::string child = joint->child;
+    RenamePart(spec, child, want.part);
+    FindPart(spec, want.part)->mass = want.mass;
+  }
+  // Sites.
+  spec.sites.clear();
+  for (std::size_t i = 0; i < recipe.sites.size(); ++i) {
+    const auto& want = recipe.sites[i];
+    const PartSpec* part = FindPart(spec, want.part);
+    if (!part)
+      throw core::ConfigError(origin, "twin.sites[" + std::to_string(i) + "].part",
+                              "one of the twin's parts, got '" + want.part + "'");
+    const std::vector<Eigen::Vector3d> points = PartMesh(*part, twin_dir).vertices;
+    if (points.empty())
+      throw core::Error("twin: part '" + part->name + "' has no surface for site " + want.name);
+    Eigen::Vector3d at;
+    double yaw = UprightYaw(points);
+    if (want.handle) {
+      Eigen::Vector3d d;
+      if (const JointSpec* joint = JointOf(spec, part->name)) {
+        d = OpeningDirection(*joint, Centroid(points));
+      } else {
+        // A free part's handle: the farthest point horizontally from its core (median x, y).
+        std::vector<double> xs, ys;
+        for (const auto& p : points) {
+          xs.push_back(p.x());
+          ys.push_back(p.y());
+        }
+        std::nth_element(xs.begin(), xs.begin() + xs.size() / 2, xs.end());
+        std::nth_element(ys.begin(), ys.begin() + ys.size() / 2, ys.end());
+        const Eigen::Vector2d core(xs[xs.size() / 2], ys[ys.size() / 2]);
+        double far = -1;
+        d = Eigen::Vector3d::UnitX();
+        for (const auto& p : points)
+          if ((p.head<2>() - core).norm() > far) {
+            far = (p.head<2>() - core).norm();
+            d = Eigen::Vector3d(p.x() - core.x(), p.y() - core.y(), 0).normalized();
+          }
+      }
+      double extreme = -1e300;
+      for (const auto& p : points) extreme = std::max(extreme, p.dot(d));
+      std::vector<Eigen::Vector3d> band;
+      for (const auto& p : points)
+        if (p.dot(d) > extreme - 0.01) band.push_back(p);
+      at = Centroid(band) - want.inset * d;
+      yaw = std::atan2(d.y(), d.x());
+    } else {
+      Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;
+      for (const auto& p : points) {
+        lo = lo.cwiseMin(p);
+        hi = hi.cwiseMax(p);
+      }
+      at = 0.5 * (lo + hi) + 0.5 * (hi - lo).cwiseProduct(Eigen::Vector3d(want.box.data()));
+    }
+    at += Eigen::Vector3d(want.offset.data());
+    spec.sites.push_back(
+        {want.name, part->name, {at.x(), at.y(), at.z()}, yaw + want.turn_deg * M_PI / 180});
+    if (want.grip_box[0] > 0 && want.grip_box[1] > 0 && want.grip_box[2] > 0) {
+      BoxSpec box;
+      box.center = spec.sites.back().position;
+      box.size = want.grip_box;
+      box.euler = {0, 0, spec.sites.back().yaw};
+      FindPart(spec, want.part)->boxes.push_back(box);
+    }
+  }
+}
+
+std::filesystem::path WriteTwinTask(const sim::TaskSpec& task,
+                                    const std::filesystem::path& twin_dir) {
+  sim::TaskSpec twin = task;
+  twin.scene = "scene.xml";
+  if (!twin.robot.empty() && std::filesystem::path(twin.robot).is_relative())
+    twin.robot = (task.file.parent_path() / twin.robot).lexically_normal().string();
+  const auto path = twin_dir / "task.yaml";
+  core::SaveConfig(path, twin);
+  return path;
+}
+
+}  // namespace twinforge::real2sim
