@@ -2,6 +2,7 @@
 
 #include <open3d/Open3D.h>
 
+#include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <map>
 
@@ -90,7 +91,9 @@ Fit FitTranslation(const std::vector<Eigen::Vector3d>& source,
 
 ArticulationEstimate EstimateArticulation(const std::vector<Eigen::Vector3d>& before,
                                           const std::vector<Eigen::Vector3d>& after,
-                                          const ArticulationOptions& options) {
+                                          const ArticulationOptions& options,
+                                          const PointTest& empty_after,
+                                          const PointTest& empty_before) {
   ArticulationEstimate e;
   // Everything below works on a 5 mm grid (a quarter of the ICP reach).
   const double voxel = 0.25 * options.max_correspondence;
@@ -100,8 +103,14 @@ ArticulationEstimate EstimateArticulation(const std::vector<Eigen::Vector3d>& be
     return cloud.VoxelDownSample(voxel)->points_;
   };
   const std::vector<Eigen::Vector3d> first = thin(before), second = thin(after);
-  e.moved_before = LargestCluster(Changed(first, second, options.changed), 2 * voxel);
-  e.moved_after = LargestCluster(Changed(second, first, options.changed), 2 * voxel);
+  auto keep = [](std::vector<Eigen::Vector3d> points, const PointTest& test) {
+    if (test) std::erase_if(points, [&](const Eigen::Vector3d& p) { return !test(p); });
+    return points;
+  };
+  e.moved_before =
+      LargestCluster(keep(Changed(first, second, options.changed), empty_after), 2 * voxel);
+  e.moved_after =
+      LargestCluster(keep(Changed(second, first, options.changed), empty_before), 2 * voxel);
   if (static_cast<int>(e.moved_before.size()) < options.min_points ||
       static_cast<int>(e.moved_after.size()) < options.min_points)
     throw core::Error("articulation: only " + std::to_string(e.moved_before.size()) + " / " +
@@ -210,6 +219,96 @@ double SnapToFrame(ArticulationEstimate& e, const std::vector<Eigen::Vector3d>& 
   }
   e.axis = best;
   return best_angle;
+}
+
+void RefitMotion(ArticulationEstimate& e, const std::vector<Eigen::Vector3d>& first,
+                 const std::vector<Eigen::Vector3d>& second, const ArticulationOptions& options) {
+  if (e.moved_before.empty() || second.empty()) return;
+  const Eigen::Vector3d axis = e.axis.normalized();
+  if (e.type == JointType::kRevolute) {
+    // The panel's width direction: across the axis, along the panel (the moved points spread
+    // most that way in the plane normal to the axis).
+    const Eigen::Vector3d c = Centroid(e.moved_before);
+    Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+    for (const auto& p : e.moved_before) {
+      Eigen::Vector3d q = p - c;
+      q -= q.dot(axis) * axis;
+      cov += q * q.transpose();
+    }
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(cov);
+    const Eigen::Vector3d width = solver.eigenvectors().col(2);
+    const Eigen::Vector3d normal = axis.cross(width);
+    double lo = 1e300, hi = -1e300, front = 0;
+    for (const auto& p : e.moved_before) {
+      lo = std::min(lo, (p - c).dot(width));
+      hi = std::max(hi, (p - c).dot(width));
+      front += (p - c).dot(normal);
+    }
+    front /= double(e.moved_before.size());
+    // The panel as the first scan saw it: in its plane, at its height, and continuing the moved
+    // points without a gap (so the carcass beside it is not taken for it).
+    double bottom = 1e300, top = -1e300;
+    for (const auto& p : e.moved_before) {
+      bottom = std::min(bottom, p.dot(axis));
+      top = std::max(top, p.dot(axis));
+    }
+    std::vector<double> along;
+    for (const auto& p : first)
+      if (std::abs((p - c).dot(normal) - front) < 0.015 && p.dot(axis) > bottom &&
+          p.dot(axis) < top)
+        along.push_back((p - c).dot(width));
+    std::sort(along.begin(), along.end());
+    const auto lo_at = std::lower_bound(along.begin(), along.end(), lo);
+    for (auto it = lo_at; it != along.begin() && *(it - 1) > *it - 0.01; --it) lo = *(it - 1);
+    const auto hi_at = std::upper_bound(along.begin(), along.end(), hi);
+    for (auto it = hi_at; it != along.end() && it != along.begin() && *it < *(it - 1) + 0.01; ++it)
+      hi = *it;
+    // The end that moved least is the hinge's.
+    const Eigen::Vector3d end_lo = c + lo * width, end_hi = c + hi * width;
+    const bool hinge_lo = (e.motion * end_lo - end_lo).norm() < (e.motion * end_hi - end_hi).norm();
+    Eigen::Vector3d origin = (hinge_lo ? end_lo : end_hi) + front * normal;
+    origin += axis * axis.dot(c - origin);
+    e.origin = origin;
+  }
+  // The amount: the best of a 1-D search (robust mean distance of the moved points, each
+  // capped at the ICP reach), then refined around it.
+  open3d::geometry::PointCloud cloud;
+  cloud.points_ = second;
+  const open3d::geometry::KDTreeFlann tree(cloud);
+  std::vector<int> index(1);
+  std::vector<double> d2(1);
+  const std::size_t stride = std::max<std::size_t>(1, e.moved_before.size() / 1500);
+  auto motion_at = [&](double amount) {
+    if (e.type == JointType::kPrismatic) return core::Pose{axis * amount, core::Quat::Identity()};
+    const core::Quat r(Eigen::AngleAxisd(amount, axis));
+    return core::Pose{e.origin - r * e.origin, r};
+  };
+  auto cost = [&](double amount) {
+    const core::Pose m = motion_at(amount);
+    const double cap = options.max_correspondence;
+    double sum = 0;
+    int n = 0;
+    for (std::size_t i = 0; i < e.moved_before.size(); i += stride, ++n) {
+      const Eigen::Vector3d q = m * e.moved_before[i];
+      sum += tree.SearchKNN(q, 1, index, d2) > 0 ? std::min(std::sqrt(d2[0]), cap) : cap;
+    }
+    return sum / std::max(1, n);
+  };
+  const bool slide = e.type == JointType::kPrismatic;
+  const double top = slide ? 0.6 : 2.2, step = slide ? 0.004 : 0.01;
+  double best = e.amount, best_cost = cost(e.amount);
+  for (double a = step; a <= top; a += step)
+    if (const double c = cost(a); c < best_cost) {
+      best_cost = c;
+      best = a;
+    }
+  for (double a = best - step; a <= best + step; a += step / 10)
+    if (const double c = cost(a); a > 0 && c < best_cost) {
+      best_cost = c;
+      best = a;
+    }
+  e.amount = best;
+  e.motion = motion_at(best);
 }
 
 }  // namespace twinforge::real2sim

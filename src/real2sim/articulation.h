@@ -3,6 +3,7 @@
 // axis (revolute), and how far it moved between the two states.
 #pragma once
 
+#include <functional>
 #include <vector>
 
 #include "real2sim/twin_spec.h"
@@ -33,9 +34,16 @@ struct ArticulationEstimate {
 };
 
 // Throws core::Error when too little changed between the states to tell.
+// With `empty_after` (a point of the first state lies where the second scan saw through: the
+// part left it) and `empty_before` (the same the other way: the part moved into it), a changed
+// point must also pass them, so that what the motion uncovered (a cabinet's inside behind its
+// door) is not taken for the part.
+using PointTest = std::function<bool(const Eigen::Vector3d&)>;
 ArticulationEstimate EstimateArticulation(const std::vector<Eigen::Vector3d>& before,
                                           const std::vector<Eigen::Vector3d>& after,
-                                          const ArticulationOptions& options = {});
+                                          const ArticulationOptions& options = {},
+                                          const PointTest& empty_after = nullptr,
+                                          const PointTest& empty_before = nullptr);
 
 // Furniture joints line up with the furniture: a drawer slides along the normal of one of its
 // carcass's faces, a door turns about a vertical or horizontal edge. Turns the estimate's axis
@@ -45,5 +53,15 @@ ArticulationEstimate EstimateArticulation(const std::vector<Eigen::Vector3d>& be
 // axis was near enough.
 double SnapToFrame(ArticulationEstimate& estimate, const std::vector<Eigen::Vector3d>& frame,
                    double max_angle = 10.0 * M_PI / 180);
+
+// With the axis direction settled (SnapToFrame), re-fits what ICP pins down worst on a flat
+// panel: a hinge goes to the edge of the panel (in the first state's surface `first`, which
+// reaches the hinge where the moved points stop short of it) on the side that moved least (a
+// small swing leaves the hinge's place poorly determined by ICP: a 1 cm slip at 0.2 rad is 5 cm
+// of hinge); and the amount becomes the one along the joint that best lays the moved points onto
+// `second` (a 1-D search). Recomputes the motion.
+void RefitMotion(ArticulationEstimate& estimate, const std::vector<Eigen::Vector3d>& first,
+                 const std::vector<Eigen::Vector3d>& second,
+                 const ArticulationOptions& options = {});
 
 }  // namespace twinforge::real2sim

@@ -67,9 +67,12 @@ nlohmann::json BuildTwin(const std::filesystem::path& scan_dir, const std::files
           if (fusion.support.Distance(p) > options.segment.min_height) out.push_back(p);
         return out;
       };
-      ArticulationEstimate e =
-          EstimateArticulation(above(fusion.points), above(after.points), options.articulation);
-      const MovingPart moving = FindMovingPart(segmentation, e, after.mesh);
+      const FreeSpace seen_before(scan), seen_after(after_scan);
+      ArticulationEstimate e = EstimateArticulation(
+          above(fusion.points), above(after.points), options.articulation,
+          [&](const Eigen::Vector3d& p) { return seen_after.SeenThrough(p); },
+          [&](const Eigen::Vector3d& p) { return seen_before.SeenThrough(p); });
+      const MovingPart moving = FindMovingPart(segmentation, e, fusion.mesh, after.mesh);
       AddMovingPart(spec, moving, e, moving.segment + "_moving", moving.segment + "_joint", out);
       articulation = {{"segment", moving.segment},
                       {"type", e.type == JointType::kRevolute ? "revolute" : "prismatic"},

@@ -274,17 +274,18 @@ ExportReport ExportMjcf(const TwinSpec& spec, const std::filesystem::path& twin_
       xml << "    <site name=\"" << s.name << "\" pos=\"" << Vec(Eigen::Vector3d(s.position.data()))
           << "\" quat=\"" << Quat(core::Yaw(s.yaw)) << "\" size=\"0.01\" group=\"5\"/>\n";
   xml << "  </worldbody>\n";
-  // A jointed part and its parent never collide: their scanned surfaces touch where a real
-  // drawer has a few mm of play, and the joint's range is what stops it. (MuJoCo's own
-  // parent-child filter skips a parent welded to the world, as furniture is.)
-  bool any = false;
-  for (const auto& j : spec.joints) {
-    if (j.parent == "world") continue;
-    xml << (any ? "" : "  <contact>\n") << "    <exclude body1=\"" << j.parent << "\" body2=\""
-        << j.child << "\"/>\n";
-    any = true;
+  // A jointed part never collides with its parent or the table: their scanned surfaces touch
+  // where a real drawer or door has a few mm of play, and the joint is what holds it. (MuJoCo's
+  // own parent-child filter skips a parent welded to the world, as furniture is.)
+  if (!spec.joints.empty()) {
+    xml << "  <contact>\n";
+    for (const auto& j : spec.joints) {
+      if (j.parent != "world")
+        xml << "    <exclude body1=\"" << j.parent << "\" body2=\"" << j.child << "\"/>\n";
+      xml << "    <exclude body1=\"table\" body2=\"" << j.child << "\"/>\n";
+    }
+    xml << "  </contact>\n";
   }
-  if (any) xml << "  </contact>\n";
   xml << "</mujoco>\n";
   report.scene = twin_dir / "scene.xml";
   core::WriteFileAtomic(report.scene, xml.str(), /*keep_backup=*/true);

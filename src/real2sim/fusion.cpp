@@ -65,6 +65,39 @@ Plane FitSupportPlane(const std::vector<Eigen::Vector3d>& points, double toleran
   return {normal, -normal.dot(mean)};
 }
 
+std::vector<float> ReadDepthMetres(const core::Scan& scan, const core::ScanFrameInfo& f) {
+  const auto& k = f.intrinsics;
+  const core::Image png = core::ReadPng(scan.dir / f.depth);
+  if (png.width != k.width || png.height != k.height || png.bit_depth != 16)
+    throw core::IoError(scan.dir.string() + ": " + f.depth + " is not a 16-bit depth image of " +
+                        "the frame's " + std::to_string(k.width) + "x" + std::to_string(k.height));
+  const std::size_t n = std::size_t(k.width) * k.height;
+  const auto* mm = reinterpret_cast<const uint16_t*>(png.bytes.data());
+  std::vector<float> depth(n);
+  for (std::size_t i = 0; i < n; ++i) depth[i] = float(mm[i] / scan.depth_scale);
+  return depth;
+}
+
+FreeSpace::FreeSpace(const core::Scan& scan, double margin, int min_frames)
+    : margin_(margin), min_frames_(min_frames) {
+  for (const auto& f : scan.frames)
+    views_.push_back({f.intrinsics, f.camera_to_base.Inverse(), ReadDepthMetres(scan, f)});
+}
+
+bool FreeSpace::SeenThrough(const Eigen::Vector3d& p) const {
+  int seen = 0;
+  for (const auto& v : views_) {
+    const Eigen::Vector3d c = v.base_to_camera * p;
+    if (c.z() <= 0.05) continue;
+    const int u = int(std::lround(v.k.fx * c.x() / c.z() + v.k.cx)),
+              w = int(std::lround(v.k.fy * c.y() / c.z() + v.k.cy));
+    if (u < 0 || w < 0 || u >= v.k.width || w >= v.k.height) continue;
+    const float d = v.depth[std::size_t(w) * v.k.width + u];
+    if (d > 0 && d > c.z() + margin_ && ++seen >= min_frames_) return true;
+  }
+  return false;
+}
+
 Fusion FuseScan(const core::Scan& scan, const sim::RobotSpec& robot, const FusionOptions& options,
                 core::Progress* progress) {
   if (scan.frames.empty()) throw core::Error("scan " + scan.dir.string() + " has no frames");
@@ -77,16 +110,11 @@ Fusion FuseScan(const core::Scan& scan, const sim::RobotSpec& robot, const Fusio
   for (const auto& f : scan.frames) {
     const auto& k = f.intrinsics;
     const core::Image color = core::ReadPng(scan.dir / f.color);
-    const core::Image depth_png = core::ReadPng(scan.dir / f.depth);
-    if (color.width != k.width || color.height != k.height || color.channels < 3 ||
-        depth_png.width != k.width || depth_png.height != k.height || depth_png.bit_depth != 16)
-      throw core::IoError(scan.dir.string() + ": " + f.color + " / " + f.depth +
-                          " do not match the frame's " + std::to_string(k.width) + "x" +
-                          std::to_string(k.height) + " (RGB 8-bit, depth 16-bit)");
+    if (color.width != k.width || color.height != k.height || color.channels < 3)
+      throw core::IoError(scan.dir.string() + ": " + f.color + " is not an RGB image of the " +
+                          "frame's " + std::to_string(k.width) + "x" + std::to_string(k.height));
     const std::size_t n = std::size_t(k.width) * k.height;
-    const auto* mm = reinterpret_cast<const uint16_t*>(depth_png.bytes.data());
-    depth.resize(n);
-    for (std::size_t i = 0; i < n; ++i) depth[i] = float(mm[i] / scan.depth_scale);
+    depth = ReadDepthMetres(scan, f);
     const sim::Camera camera{k, f.camera_to_base};
     if (mask) {
       mask->Pose(sim::ArmVector(f.joint_positions.data()), f.gripper_width);

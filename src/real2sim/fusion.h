@@ -35,6 +35,28 @@ struct Fusion {
 Fusion FuseScan(const core::Scan& scan, const sim::RobotSpec& robot, const FusionOptions& options,
                 core::Progress* progress = nullptr);
 
+// A frame's depth in metres (0 = none), checked against the frame's size. Throws IoError.
+std::vector<float> ReadDepthMetres(const core::Scan& scan, const core::ScanFrameInfo& frame);
+
+// What a scan saw through: a point is in seen free space when at least `min_frames` frames
+// measured something farther than it (by more than `margin`) along their ray through it. Tells
+// a part that moved into empty space from a surface a moved part uncovered.
+class FreeSpace {
+ public:
+  explicit FreeSpace(const core::Scan& scan, double margin = 0.015, int min_frames = 2);
+  bool SeenThrough(const Eigen::Vector3d& p) const;
+
+ private:
+  struct View {
+    core::PinholeIntrinsics k;
+    core::Pose base_to_camera;
+    std::vector<float> depth;
+  };
+  std::vector<View> views_;
+  double margin_;
+  int min_frames_;
+};
+
 // RANSAC for the plane with the most points within `tolerance` whose normal is within
 // `max_tilt` (rad) of +z, refined by least squares on its inliers. Deterministic for a seed.
 Plane FitSupportPlane(const std::vector<Eigen::Vector3d>& points, double tolerance, double max_tilt,

@@ -153,4 +153,14 @@ core::Pose AlignPoints(const std::vector<Eigen::Vector3d>& source,
   return core::Pose::FromMatrix(result.transformation_);
 }
 
+void AppendMesh(Mesh& into, const Mesh& from) {
+  const bool colours = (into.vertices.empty() || !into.colors.empty()) && !from.colors.empty();
+  if (!colours) into.colors.clear();
+  const int offset = static_cast<int>(into.vertices.size());
+  into.vertices.insert(into.vertices.end(), from.vertices.begin(), from.vertices.end());
+  if (colours) into.colors.insert(into.colors.end(), from.colors.begin(), from.colors.end());
+  for (const auto& t : from.triangles)
+    into.triangles.push_back(t + Eigen::Vector3i::Constant(offset));
+}
+
 }  // namespace twinforge::real2sim

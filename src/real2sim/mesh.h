@@ -49,6 +49,9 @@ Mesh KeepTriangles(const Mesh& mesh, Keep keep) {
   return out;
 }
 
+// Adds `from`'s vertices and triangles to `into` (colours kept only if both have them).
+void AppendMesh(Mesh& into, const Mesh& from);
+
 // Writes `mesh` as PLY (binary, with colours) or OBJ by the extension. Throws IoError.
 void WriteMesh(const std::filesystem::path& path, const Mesh& mesh);
 // Reads a PLY or OBJ mesh. Throws IoError naming the file.

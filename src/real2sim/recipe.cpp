@@ -76,9 +76,12 @@ const JointSpec* JointOf(const TwinSpec& spec, const std::string& child) {
 
 }  // namespace
 
-MovingPart FindMovingPart(const Segmentation& first, ArticulationEstimate& e, const Mesh& second,
-                          double snap) {
+MovingPart FindMovingPart(const Segmentation& first, ArticulationEstimate& e,
+                          const Mesh& first_mesh, const Mesh& second, double snap) {
   MovingPart out;
+  std::vector<Eigen::Vector3d> first_points;
+  for (const auto& s : first.segments)
+    first_points.insert(first_points.end(), s.points.begin(), s.points.end());
   // The segment holding most of what moved.
   const Segment* segment = nullptr;
   int best = 0;
@@ -99,6 +102,7 @@ MovingPart FindMovingPart(const Segmentation& first, ArticulationEstimate& e, co
       spdlog::info("twin: the joint axis lined up with {}'s faces (turned {:.2f} deg)",
                    segment->name, turned * 180 / M_PI);
   }
+  RefitMotion(e, first_points, second.vertices);
   JointSpec joint;
   joint.type = e.type;
   joint.axis = {e.axis.x(), e.axis.y(), e.axis.z()};
@@ -113,7 +117,7 @@ MovingPart FindMovingPart(const Segmentation& first, ArticulationEstimate& e, co
   }
   lo.tail<2>().array() -= 0.004;
   hi.tail<2>().array() += 0.004;
-  hi.x() += 0.005;
+  hi.x() += 0.05;  // a handle the depth sensor half lost may float free of the front
   if (e.type == JointType::kPrismatic) {
     // A tray reaches back into its carcass, short of the carcass's back.
     double back = 1e300;
@@ -127,17 +131,22 @@ MovingPart FindMovingPart(const Segmentation& first, ArticulationEstimate& e, co
   out.region.size = {size.x(), size.y(), size.z()};
   const Eigen::Vector3d rpy = core::ToRollPitchYaw(core::Quat(r));
   out.region.euler = {rpy.x(), rpy.y(), rpy.z()};
-  // Its surface in the second state, moved back to the first.
-  const core::Pose back = e.motion.Inverse();
-  out.mesh = KeepTriangles(second, [&](std::size_t t) {
-    const auto& tri = second.triangles[t];
-    const Eigen::Vector3d c =
-        (second.vertices[tri[0]] + second.vertices[tri[1]] + second.vertices[tri[2]]) / 3.0;
-    return out.region.Contains(back * c);
-  });
-  for (auto& v : out.mesh.vertices) v = back * v;
+  // Its surface as the first scan saw it (its front, straight on) and as the second did (what
+  // it showed once moved), moved back to the first state.
+  auto inside = [&](const Mesh& mesh, const core::Pose& to_first) {
+    Mesh part = KeepTriangles(mesh, [&](std::size_t t) {
+      const auto& tri = mesh.triangles[t];
+      const Eigen::Vector3d c =
+          (mesh.vertices[tri[0]] + mesh.vertices[tri[1]] + mesh.vertices[tri[2]]) / 3.0;
+      return out.region.Contains(to_first * c);
+    });
+    for (auto& v : part.vertices) v = to_first * v;
+    return part;
+  };
+  out.mesh = inside(first_mesh, core::Pose{});
+  AppendMesh(out.mesh, inside(second, e.motion.Inverse()));
   if (out.mesh.empty())
-    throw core::Error("articulation: the second scan has no surface where the part moved to");
+    throw core::Error("articulation: the scans have no surface where the part is");
   return out;
 }
 
@@ -308,6 +317,15 @@ void ApplyRecipe(TwinSpec& spec, const sim::TwinRecipe& recipe,
     at += Eigen::Vector3d(want.offset.data());
     spec.sites.push_back(
         {want.name, part->name, {at.x(), at.y(), at.z()}, yaw + want.turn_deg * M_PI / 180});
+    const core::Quat turn = core::Yaw(spec.sites.back().yaw);
+    if (want.clear_box[0] > 0 && want.clear_box[1] > 0 && want.clear_box[2] > 0) {
+      const Eigen::Vector3d centre = at + turn * Eigen::Vector3d(want.clear_offset.data());
+      CutSpec cut;
+      cut.box.center = {centre.x(), centre.y(), centre.z()};
+      cut.box.size = want.clear_box;
+      cut.box.euler = {0, 0, spec.sites.back().yaw};
+      FindPart(spec, want.part)->cuts.push_back(cut);
+    }
     if (want.grip_box[0] > 0 && want.grip_box[1] > 0 && want.grip_box[2] > 0) {
       BoxSpec box;
       box.center = spec.sites.back().position;

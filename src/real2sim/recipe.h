@@ -18,14 +18,16 @@ struct MovingPart {
   BoxSpec region;       // the room it takes: an oriented box around what moved, reaching back
                         // into the segment (a drawer's tray) or a panel's thickness (a door)
   Eigen::Vector3d opens = Eigen::Vector3d::UnitX();  // unit: the way its front moves as it opens
-  Mesh mesh;  // its surface from the second scan (which sees more of it), moved back
+  Mesh mesh;  // its surface from both scans (the second sees more of it), in the first state
 };
 
 // Finds the moving part of `estimate` among the segments of the first scan, lines the estimate
-// up with that segment (SnapToFrame, within `snap` rad; 0: not at all), and cuts the part's
-// surface out of the second scan's mesh. Throws core::Error if no segment holds what moved.
+// up with that segment (SnapToFrame, within `snap` rad; 0: not at all; then RefitMotion), and
+// cuts the part's surface out of both scans' meshes. Throws core::Error if no segment holds
+// what moved.
 MovingPart FindMovingPart(const Segmentation& first, ArticulationEstimate& estimate,
-                          const Mesh& second, double snap = 10.0 * M_PI / 180);
+                          const Mesh& first_mesh, const Mesh& second,
+                          double snap = 10.0 * M_PI / 180);
 
 // Adds `moving` to `spec` as part `name` (its mesh written to twin_dir/meshes/<name>.ply), cut
 // out of its segment's part by a subtract cut, and joined to it by joint `joint` with the

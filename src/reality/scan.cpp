@@ -94,6 +94,9 @@ int OperateThenHome(Robot& robot, Operator& op, const sim::TaskSpec& task) {
     ++actions;
     o = robot.Observe(false);
   }
+  const SuccessAnswer answer = robot.QuerySuccess();
+  if (answer != SuccessAnswer::kUnknown)
+    spdlog::info("scan: the robot reports the operator's run a {}", ToString(answer));
   // Home in small joint steps (the safety filter's per-step limit is for actions; a straight
   // interpolation in joint space keeps each step as small).
   const sim::RobotSpec spec = sim::LoadRobotSpec(RobotDescriptionPath(info.robot));

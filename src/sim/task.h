@@ -301,6 +301,11 @@ struct TwinSiteRecipe {
   // A solid box (x, y, z sizes in the site's frame, m) added at the site: a handle the scan
   // shows poorly, as a person would add one in the editor. Zero: none.
   std::array<double, 3> grip_box{0, 0, 0};
+  // The scanned surface cut away around the site first (a subtract cut: sizes, and the centre's
+  // offset from the site, in the site's frame, m): what is left of a half-lost handle would
+  // only get in the fingers' way. Zero size: nothing cut.
+  std::array<double, 3> clear_box{0, 0, 0};
+  std::array<double, 3> clear_offset{0, 0, 0};
   template <class A>
   void Serialize(A& a) {
     a("name", name);
@@ -311,6 +316,8 @@ struct TwinSiteRecipe {
     a("offset", offset);
     a("turn_deg", turn_deg);
     a("grip_box", grip_box);
+    a("clear_box", clear_box);
+    a("clear_offset", clear_offset);
     a.Require(!name.empty() && !part.empty(), "name", "a site name and its part");
   }
 };
