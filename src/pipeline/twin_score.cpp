@@ -135,7 +135,8 @@ TwinScore ScoreTwin(const std::filesystem::path& twin_dir, const std::filesystem
     for (const auto& part_name : TwinSubtree(twin, name))
       for (const auto& part : twin.parts)
         if (part.name == part_name) {
-          const real2sim::Mesh mesh = real2sim::PartMesh(part, twin_dir);
+          real2sim::Mesh mesh = real2sim::PartMesh(part, twin_dir);
+          for (const auto& box : part.boxes) real2sim::AppendMesh(mesh, real2sim::BoxMesh(box));
           const int count = std::max(100, int(mesh.Area() * options.density));
           const Points p = real2sim::SampleSurface(mesh, count, 7);
           twin_points.insert(twin_points.end(), p.begin(), p.end());
@@ -146,7 +147,12 @@ TwinScore ScoreTwin(const std::filesystem::path& twin_dir, const std::filesystem
       o.completeness_mm = 1000 * Mean(real2sim::NearestDistances(visible, twin_points));
       o.chamfer_mm = 0.5 * (o.accuracy_mm + o.completeness_mm);
       const core::Pose fix = real2sim::AlignPoints(twin_points, full, 0.02);
-      o.position_mm = 1000 * fix.translation.norm();
+      // How far the fix moves the twin's own centre (its translation alone would count a turn
+      // about the robot's base as a shift).
+      Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+      for (const auto& p : twin_points) centre += p;
+      centre /= double(twin_points.size());
+      o.position_mm = 1000 * (fix * centre - centre).norm();
       o.rotation_deg = Eigen::AngleAxisd(fix.rotation).angle() * 180 / M_PI;
       chamfers.push_back(o.chamfer_mm);
     }

@@ -8,7 +8,8 @@
 //  - completeness: mean distance from the world's surface the scan views could see to the twin's;
 //  - chamfer: the mean of the two (a twin cannot know what no view saw, so the first direction
 //    goes to the full surface and the second comes from the visible one);
-//  - pose: the rigid motion (ICP) that best moves the twin's surface onto the world's.
+//  - pose: the rigid motion (ICP) that best moves the twin's surface onto the world's: how far it
+//    moves the twin's centre, and by what angle it turns it.
 // Per task joint: the angle between the axes (opening directions), the upper limit's error, and
 // for a hinge the distance of the twin's axis from the world's. Per twin site that the world
 // also has: the offset between the two (informative; not a target).

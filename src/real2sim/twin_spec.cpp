@@ -19,6 +19,24 @@ bool BoxSpec::Contains(const Eigen::Vector3d& p) const {
   return true;
 }
 
+Mesh BoxMesh(const BoxSpec& box) {
+  Mesh mesh;
+  const core::Pose pose = box.pose();
+  const Eigen::Vector3d half = 0.5 * Eigen::Vector3d(box.size.data());
+  for (int i = 0; i < 8; ++i)
+    mesh.vertices.push_back(pose * Eigen::Vector3d((i & 1 ? 1 : -1) * half.x(),
+                                                   (i & 2 ? 1 : -1) * half.y(),
+                                                   (i & 4 ? 1 : -1) * half.z()));
+  // Two triangles per face, wound outward.
+  const int faces[6][4] = {{0, 2, 6, 4}, {1, 5, 7, 3}, {0, 4, 5, 1},
+                           {2, 3, 7, 6}, {0, 1, 3, 2}, {4, 6, 7, 5}};
+  for (const auto& f : faces) {
+    mesh.triangles.emplace_back(f[0], f[1], f[2]);
+    mesh.triangles.emplace_back(f[0], f[2], f[3]);
+  }
+  return mesh;
+}
+
 Mesh CutMesh(const Mesh& mesh, const CutSpec& cut) {
   const bool keep_inside = cut.op == CutOp::kIntersect;
   return KeepTriangles(mesh, [&](std::size_t i) {

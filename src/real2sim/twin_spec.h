@@ -156,6 +156,9 @@ Mesh CutMesh(const Mesh& mesh, const CutSpec& cut);
 // A part's mesh: its file (under `twin_dir`) with its cuts applied in order.
 Mesh PartMesh(const PartSpec& part, const std::filesystem::path& twin_dir);
 
+// A box's surface as a closed mesh (12 triangles, outward), base frame.
+Mesh BoxMesh(const BoxSpec& box);
+
 // Loads and validates twin.yaml. Throws ConfigError naming the file and field.
 TwinSpec LoadTwinSpec(const std::filesystem::path& path);
 // Cross-field checks (names unique, references resolve, one parent per part, axes non-zero,
