@@ -20,6 +20,11 @@ done
 "$tf" sim bench --task open_drawer | tee "$out/bench.json"
 "$tf" sim view --task open_drawer --level 1 --out "$out/frames"
 "$tf" scan capture --reality proxy:open_drawer --task open_drawer --out "$out/scan" | tee "$out/scan.json"
+"$tf" scan capture --reality proxy:open_drawer --task open_drawer --operate-first \
+  --out "$out/scan_open" | tee "$out/scan_open.json"
+"$tf" twin build --scan "$out/scan" --scan-after "$out/scan_open" --task open_drawer \
+  --out "$out/twin" > "$out/twin_build.json"
+"$tf" sim expert --task "$out/twin/task.yaml" --episodes 100 --level 1 | tee "$out/twin_expert.json"
 "$tf" demos record --reality proxy:open_drawer --task open_drawer --n 15 --out "$out/demos/real.hdf5" \
   | tee "$out/demos.json"
 echo "main job done: results in $out/"
