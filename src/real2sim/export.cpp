@@ -134,15 +134,9 @@ ExportReport ExportMjcf(const TwinSpec& spec, const std::filesystem::path& twin_
     const double area = b.mesh.Area();
     // The body frame: upright, turned to the part's faces, centred on its bounds.
     const auto dense = SampleSurface(b.mesh, 20000, 7);
-    const core::Quat yaw = core::Yaw(UprightYaw(dense));
-    Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;
-    for (const auto& p : dense) {
-      const Eigen::Vector3d q = yaw.inverse() * p;
-      lo = lo.cwiseMin(q);
-      hi = hi.cwiseMax(q);
-    }
-    b.pose = {yaw * (0.5 * (lo + hi)), yaw};
-    b.half = 0.5 * (hi - lo);
+    const UprightBounds bounds = UprightBox(dense);
+    b.pose = {bounds.yaw * (0.5 * (bounds.lo + bounds.hi)), bounds.yaw};
+    b.half = 0.5 * (bounds.hi - bounds.lo);
     // Collision boxes on a grid coarse enough for the budget.
     const core::Pose to_body = b.pose.Inverse();
     for (double voxel = options.collision_voxel;; voxel *= 1.25) {

@@ -163,4 +163,17 @@ void AppendMesh(Mesh& into, const Mesh& from) {
     into.triangles.push_back(t + Eigen::Vector3i::Constant(offset));
 }
 
+UprightBounds UprightBox(const std::vector<Eigen::Vector3d>& points) {
+  UprightBounds b;
+  b.yaw = core::Yaw(UprightYaw(points));
+  b.lo = Eigen::Vector3d::Constant(1e300);
+  b.hi = -b.lo;
+  for (const auto& p : points) {
+    const Eigen::Vector3d q = b.yaw.inverse() * p;
+    b.lo = b.lo.cwiseMin(q);
+    b.hi = b.hi.cwiseMax(q);
+  }
+  return b;
+}
+
 }  // namespace twinforge::real2sim

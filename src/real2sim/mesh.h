@@ -75,6 +75,13 @@ double ChamferDistance(const std::vector<Eigen::Vector3d>& a,
 // furniture and objects stand upright on the table, so their faces line up with this frame.
 double UprightYaw(const std::vector<Eigen::Vector3d>& points);
 
+// The points' bounds in that upright frame (lo, hi in the frame turned by `yaw`).
+struct UprightBounds {
+  core::Quat yaw = core::Quat::Identity();
+  Eigen::Vector3d lo = Eigen::Vector3d::Zero(), hi = Eigen::Vector3d::Zero();
+};
+UprightBounds UprightBox(const std::vector<Eigen::Vector3d>& points);
+
 // The rigid motion (point-to-point ICP from the identity, correspondences within `reach` m)
 // that best moves `source` onto `target`.
 core::Pose AlignPoints(const std::vector<Eigen::Vector3d>& source,

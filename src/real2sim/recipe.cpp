@@ -39,14 +39,8 @@ Eigen::Vector3d OpeningDirection(const JointSpec& joint, const Eigen::Vector3d& 
 
 // Horizontal extents (larger first) and height of the points, in their upright frame.
 Eigen::Vector3d UprightSize(const std::vector<Eigen::Vector3d>& points) {
-  const core::Quat yaw = core::Yaw(UprightYaw(points));
-  Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;
-  for (const auto& p : points) {
-    const Eigen::Vector3d q = yaw.inverse() * p;
-    lo = lo.cwiseMin(q);
-    hi = hi.cwiseMax(q);
-  }
-  const Eigen::Vector3d e = hi - lo;
+  const UprightBounds b = UprightBox(points);
+  const Eigen::Vector3d e = b.hi - b.lo;
   return {std::max(e.x(), e.y()), std::min(e.x(), e.y()), e.z()};
 }
 
