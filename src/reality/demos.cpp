@@ -106,26 +106,17 @@ RecordReport RecordDemos(Robot& robot, Operator& op, const sim::TaskSpec& task,
     client.ResetGripper();
     core::Rng cloud_rng(seed, 0xc10d);
     DemoBuffer demo;
-    double seconds = 0;
-    bool quit = false;
-    for (int idle = 0; demo.steps < std::size_t(max_steps) && idle < 100000;) {
-      const OperatorInput in = op.Next(o);
-      seconds += in.think;
-      if (in.kind == OperatorInput::Kind::kQuit) quit = true;
-      if (in.kind == OperatorInput::Kind::kQuit || in.kind == OperatorInput::Kind::kDone) break;
-      if (in.kind == OperatorInput::Kind::kIdle) {
-        ++idle;
-        continue;
-      }
-      if (o.frames.empty())
-        throw core::Error(info.name + " sent an observation without a camera frame");
-      demo.Add(o, in.action, cloud, cloud_rng);
-      client.Act(in.action, o);
-      o = robot.Observe(true);
-    }
+    const OperatorRun run =
+        RunOperator(robot, op, client, o, max_steps, true,
+                    [&](const Observation& seen, const sim::Action& action) {
+                      if (seen.frames.empty())
+                        throw core::Error(info.name +
+                                          " sent an observation without a camera frame");
+                      demo.Add(seen, action, cloud, cloud_rng);
+                    });
     report.steps += static_cast<long>(demo.steps);
-    report.operator_seconds += seconds;
-    if (quit) {
+    report.operator_seconds += run.seconds;
+    if (run.quit) {
       spdlog::warn("demos: the operator stopped recording; {} demos kept in {}", report.kept,
                    out.string());
       break;
@@ -139,7 +130,7 @@ RecordReport RecordDemos(Robot& robot, Operator& op, const sim::TaskSpec& task,
     const nlohmann::json meta = {{"seed", seed},
                                  {"level", options.level},
                                  {"attempt", attempt},
-                                 {"operator_seconds", seconds},
+                                 {"operator_seconds", run.seconds},
                                  {"keys", demo.steps}};
     const bool valid =
         options.valid_every > 0 && report.kept % options.valid_every == options.valid_every - 1;

@@ -82,18 +82,7 @@ int OperateThenHome(Robot& robot, Operator& op, const sim::TaskSpec& task) {
   const RobotInfo info = robot.Info();
   ActionClient client(robot, task.control.limits);
   Observation o = robot.Observe(false);
-  int actions = 0;
-  for (int idle = 0; actions < 3 * task.horizon && idle < 100000;) {
-    const OperatorInput in = op.Next(o);
-    if (in.kind == OperatorInput::Kind::kQuit || in.kind == OperatorInput::Kind::kDone) break;
-    if (in.kind == OperatorInput::Kind::kIdle) {
-      ++idle;
-      continue;
-    }
-    client.Act(in.action, o);
-    ++actions;
-    o = robot.Observe(false);
-  }
+  const int actions = RunOperator(robot, op, client, o, 3 * task.horizon, false).actions;
   const SuccessAnswer answer = robot.QuerySuccess();
   if (answer != SuccessAnswer::kUnknown)
     spdlog::info("scan: the robot reports the operator's run a {}", ToString(answer));

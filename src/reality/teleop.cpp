@@ -168,4 +168,24 @@ SuccessAnswer KeyboardOperator::Judge() {
   }
 }
 
+OperatorRun RunOperator(Robot& robot, Operator& op, ActionClient& client, Observation& o,
+                        int max_actions, bool with_frames, const BeforeAct& before_act) {
+  OperatorRun run;
+  for (int idle = 0; run.actions < max_actions && idle < 100000;) {
+    const OperatorInput in = op.Next(o);
+    run.seconds += in.think;
+    if (in.kind == OperatorInput::Kind::kQuit) run.quit = true;
+    if (in.kind == OperatorInput::Kind::kQuit || in.kind == OperatorInput::Kind::kDone) break;
+    if (in.kind == OperatorInput::Kind::kIdle) {
+      ++idle;
+      continue;
+    }
+    if (before_act) before_act(o, in.action);
+    client.Act(in.action, o);
+    ++run.actions;
+    o = robot.Observe(with_frames);
+  }
+  return run;
+}
+
 }  // namespace twinforge::reality

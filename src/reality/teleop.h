@@ -8,6 +8,7 @@
 #pragma once
 
 #include <cstdio>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -82,6 +83,21 @@ class RobotOperator : public Operator {
  private:
   Robot& robot_;
 };
+
+// What one run of an operator at the controls did.
+struct OperatorRun {
+  int actions = 0;
+  double seconds = 0;  // the operator's own time (thinking, hesitating)
+  bool quit = false;   // they asked to stop altogether, not just "done"
+};
+
+// Drives `robot` with `op`'s inputs through `client` from observation `o` (left at the last one)
+// until the operator says done or quit, or after `max_actions`. `before_act` sees each
+// observation and the action about to be sent (a recorder stores them); observations carry
+// camera frames only `with_frames`.
+using BeforeAct = std::function<void(const Observation&, const sim::Action&)>;
+OperatorRun RunOperator(Robot& robot, Operator& op, ActionClient& client, Observation& o,
+                        int max_actions, bool with_frames, const BeforeAct& before_act = nullptr);
 
 // A person at a terminal. Keys (printed by Help()):
 //   w/s +x/-x (away from / toward the robot base)   a/d +y/-y   r/f up/down
