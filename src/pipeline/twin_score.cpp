@@ -149,9 +149,7 @@ TwinScore ScoreTwin(const std::filesystem::path& twin_dir, const std::filesystem
       const core::Pose fix = real2sim::AlignPoints(twin_points, full, 0.02);
       // How far the fix moves the twin's own centre (its translation alone would count a turn
       // about the robot's base as a shift).
-      Eigen::Vector3d centre = Eigen::Vector3d::Zero();
-      for (const auto& p : twin_points) centre += p;
-      centre /= double(twin_points.size());
+      const Eigen::Vector3d centre = real2sim::Centroid(twin_points);
       o.position_mm = 1000 * (fix * centre - centre).norm();
       o.rotation_deg = Eigen::AngleAxisd(fix.rotation).angle() * 180 / M_PI;
       chamfers.push_back(o.chamfer_mm);

@@ -44,12 +44,6 @@ std::vector<Eigen::Vector3d> LargestCluster(const std::vector<Eigen::Vector3d>& 
   return out;
 }
 
-Eigen::Vector3d Centroid(const std::vector<Eigen::Vector3d>& points) {
-  Eigen::Vector3d c = Eigen::Vector3d::Zero();
-  for (const auto& p : points) c += p;
-  return c / double(points.size());
-}
-
 struct Fit {
   Eigen::Vector3d shift = Eigen::Vector3d::Zero();
   double fitness = 0, rmse = 1e300;

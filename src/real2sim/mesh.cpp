@@ -104,6 +104,12 @@ std::vector<double> NearestDistances(const std::vector<Eigen::Vector3d>& from,
   return distances;
 }
 
+Eigen::Vector3d Centroid(const std::vector<Eigen::Vector3d>& points) {
+  Eigen::Vector3d c = Eigen::Vector3d::Zero();
+  for (const auto& p : points) c += p;
+  return c / double(std::max<std::size_t>(1, points.size()));
+}
+
 double ChamferDistance(const std::vector<Eigen::Vector3d>& a,
                        const std::vector<Eigen::Vector3d>& b) {
   if (a.empty() || b.empty()) return std::numeric_limits<double>::infinity();

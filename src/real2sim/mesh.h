@@ -67,6 +67,9 @@ std::vector<Eigen::Vector3d> SampleSurface(const Mesh& mesh, int count, uint64_t
 std::vector<double> NearestDistances(const std::vector<Eigen::Vector3d>& from,
                                      const std::vector<Eigen::Vector3d>& to);
 
+// The mean of the points (zero for none).
+Eigen::Vector3d Centroid(const std::vector<Eigen::Vector3d>& points);
+
 // Mean of the two directed mean nearest-neighbour distances (m): the symmetric Chamfer distance.
 double ChamferDistance(const std::vector<Eigen::Vector3d>& a,
                        const std::vector<Eigen::Vector3d>& b);

@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <map>
 
 #include "core/config.h"
 #include "core/error.h"
@@ -11,12 +10,6 @@
 namespace twinforge::real2sim {
 
 namespace {
-
-Eigen::Vector3d Centroid(const std::vector<Eigen::Vector3d>& points) {
-  Eigen::Vector3d c = Eigen::Vector3d::Zero();
-  for (const auto& p : points) c += p;
-  return c / double(std::max<std::size_t>(1, points.size()));
-}
 
 // A frame whose x is `x` and whose z is as near +z as x allows.
 Eigen::Matrix3d FrameAlong(const Eigen::Vector3d& x) {
@@ -184,53 +177,51 @@ void AddMovingPart(TwinSpec& spec, const MovingPart& moving, const ArticulationE
 void ApplyRecipe(TwinSpec& spec, const sim::TwinRecipe& recipe,
                  const std::filesystem::path& twin_dir, const std::string& origin) {
   // Parts: nearest size first, among the parts no joint moves.
-  std::vector<std::string> free;
-  std::map<std::string, Eigen::Vector3d> sizes;
+  struct Candidate {
+    std::string name;
+    Eigen::Vector3d size;
+    bool taken = false;
+  };
+  std::vector<Candidate> candidates;
   for (const auto& p : spec.parts)
-    if (!JointOf(spec, p.name)) {
-      free.push_back(p.name);
-      sizes[p.name] = UprightSize(PartMesh(p, twin_dir).vertices);
-    }
+    if (!JointOf(spec, p.name))
+      candidates.push_back({p.name, UprightSize(PartMesh(p, twin_dir).vertices)});
   std::vector<bool> done(recipe.parts.size(), false);
-  std::vector<std::string> claimed;
   for (std::size_t round = 0; round < recipe.parts.size(); ++round) {
     double best = 1e300;
     std::size_t best_r = 0;
-    std::string best_part;
+    Candidate* pick = nullptr;
     for (std::size_t r = 0; r < recipe.parts.size(); ++r) {
       if (done[r]) continue;
       const Eigen::Vector3d want(recipe.parts[r].size.data());
-      for (const auto& name : free) {
-        if (std::find(claimed.begin(), claimed.end(), name) != claimed.end()) continue;
-        const Eigen::Vector3d has = sizes[name].cwiseMax(1e-4);
-        const double cost = (has.array() / want.array()).log().abs().sum();
+      for (auto& c : candidates) {
+        if (c.taken) continue;
+        const double cost = (c.size.cwiseMax(1e-4).array() / want.array()).log().abs().sum();
         if (cost < best) {
           best = cost;
           best_r = r;
-          best_part = name;
+          pick = &c;
         }
       }
     }
-    if (best_part.empty()) {
+    if (!pick) {
       for (std::size_t r = 0; r < recipe.parts.size(); ++r)
         if (!done[r])
           throw core::ConfigError(origin, "twin.parts[" + std::to_string(r) + "]",
                                   "a segment of the scan for '" + recipe.parts[r].name +
                                       "', but every segment is taken (" +
-                                      std::to_string(free.size()) + " found)");
+                                      std::to_string(candidates.size()) + " found)");
     }
     const auto& want = recipe.parts[best_r];
-    const Eigen::Vector3d has = sizes[best_part];
+    const Eigen::Vector3d& has = pick->size;
     if (best > 3 * std::log(1.5))
       spdlog::warn("twin: '{}' ({:.3f} x {:.3f} x {:.3f} m) is the nearest to recipe part '{}'",
-                   best_part, has.x(), has.y(), has.z(), want.name);
-    spdlog::info("twin: {} is {} ({:.3f} x {:.3f} x {:.3f} m)", best_part, want.name, has.x(),
+                   pick->name, has.x(), has.y(), has.z(), want.name);
+    spdlog::info("twin: {} is {} ({:.3f} x {:.3f} x {:.3f} m)", pick->name, want.name, has.x(),
                  has.y(), has.z());
     done[best_r] = true;
-    claimed.push_back(want.name);
-    RenamePart(spec, best_part, want.name);
-    std::replace(free.begin(), free.end(), best_part, want.name);
-    sizes[want.name] = has;
+    pick->taken = true;
+    RenamePart(spec, pick->name, want.name);
     PartSpec* part = FindPart(spec, want.name);
     part->fixed = want.fixed;
     if (want.mass > 0) part->mass = want.mass;
