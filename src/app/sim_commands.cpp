@@ -23,6 +23,7 @@ struct ExpertOptions {
   uint64_t seed = 0;
   double noise = 0.0;
   int threads = core::DefaultThreadCount();
+  bool all_contacts = false;  // trace: every contact, not only the robot's
 };
 
 // --task, --level, --seed, --noise, and --episode for commands that show one episode.
@@ -67,6 +68,9 @@ void AddSimCommands(CLI::App& parent, int& exit_code) {
   auto trace_options = std::make_shared<ExpertOptions>();
   auto* trace = sim->add_subcommand("trace", "print one expert episode step by step (JSON lines)");
   AddEpisodeOptions(trace, *trace_options, true);
+  trace->add_flag("--all-contacts", trace_options->all_contacts,
+                  "list every contact in `robot_contacts`, not only the robot's (a twin's part "
+                  "touching its carcass or the table)");
   trace->callback([trace_options, &exit_code] {
     const auto& o = *trace_options;
     auto task = std::make_shared<const sim::Task>(sim::LoadTaskSpec(o.task));
@@ -87,7 +91,7 @@ void AddSimCommands(CLI::App& parent, int& exit_code) {
         const int g1 = d->contact[c].geom1, g2 = d->contact[c].geom2;
         const bool r1 = m->geom_group[g1] == sim::kRobotGeomGroup,
                    r2 = m->geom_group[g2] == sim::kRobotGeomGroup;
-        if (r1 == r2 && !std::getenv("TWINFORGE_TRACE_ALL_CONTACTS")) continue;
+        if (r1 == r2 && !o.all_contacts) continue;
         auto name = [m](int g) {
           const char* n = mj_id2name(m, mjOBJ_GEOM, g);
           return n ? std::string(n) : "geom " + std::to_string(g);
