@@ -4,8 +4,8 @@
 #include "pipeline/twin_score.h"
 
 #include <gtest/gtest.h>
-#include <unistd.h>
 
+#include "core/test_support.h"
 #include "real2sim/build.h"
 #include "reality/proxy_reality.h"
 #include "reality/scan.h"
@@ -24,9 +24,7 @@ class TwinFromScans : public ::testing::TestWithParam<Case> {};
 
 TEST_P(TwinFromScans, TheRebuiltTwinMeetsTheTargetsAndTheExpertStillSucceeds) {
   const Case c = GetParam();
-  const auto dir = std::filesystem::temp_directory_path() /
-                   ("twinforge_twin_score_" + std::to_string(::getpid())) / c.world;
-  std::filesystem::remove_all(dir);
+  const auto dir = core::testing::TestDir("twin_score", c.world);
   const auto world = reality::ResolveWorldDir(c.world);
   const sim::TaskSpec task = sim::LoadTaskSpec(c.world);
   const reality::ScanOptions scan;

@@ -1,8 +1,8 @@
 #include "real2sim/build.h"
 
 #include <gtest/gtest.h>
-#include <unistd.h>
 
+#include "core/test_support.h"
 #include "real2sim/test_scenes.h"
 #include "sim/mjcf.h"
 
@@ -12,9 +12,7 @@ namespace {
 // From a scan to a twin the sim loads: a fixed fixture and a free object that rests on the
 // exported table instead of falling through it.
 TEST(Build, AScanBecomesATwinTheSimLoads) {
-  const auto root = std::filesystem::temp_directory_path() /
-                    ("twinforge_build_test_" + std::to_string(::getpid()));
-  std::filesystem::remove_all(root);
+  const auto root = core::testing::TestDir("build_test");
   testing::SyntheticScan(root / "scan", R"(<mujoco><worldbody>
       <geom type="box" pos="0.5 0 -0.02" size="0.8 0.8 0.02" rgba="0.7 0.7 0.7 1"/>
       <geom type="box" pos="0.75 -0.1 0.1" size="0.17 0.17 0.1" rgba="0.6 0.45 0.3 1"/>

@@ -2,8 +2,8 @@
 
 #include <gtest/gtest.h>
 #include <open3d/Open3D.h>
-#include <unistd.h>
 
+#include "core/test_support.h"
 #include "sim/mjcf.h"
 #include "sim/model.h"
 #include "sim/robot.h"
@@ -30,9 +30,7 @@ struct ChestTwin {
 
 ChestTwin MakeChestTwin(const std::string& name) {
   ChestTwin t;
-  t.dir = std::filesystem::temp_directory_path() /
-          ("twinforge_export_" + std::to_string(::getpid())) / name;
-  std::filesystem::remove_all(t.dir);
+  t.dir = core::testing::TestDir("export", name);
   const double x0 = 0.65, w = 0.34, d = 0.32, h = 0.2, p = 0.015;
   WriteMesh(t.dir / "meshes/chest.ply",
             Panels({{{x0, -w / 2, 0}, {d, w, p}},                                 // bottom

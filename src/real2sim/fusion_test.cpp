@@ -1,9 +1,9 @@
 #include "real2sim/fusion.h"
 
 #include <gtest/gtest.h>
-#include <unistd.h>
 
 #include "core/rng.h"
+#include "core/test_support.h"
 #include "real2sim/test_scenes.h"
 
 namespace twinforge::real2sim {
@@ -28,9 +28,7 @@ std::vector<Eigen::Vector3d> BoxSurface() {
 }
 
 TEST(Fusion, RecoversAKnownBoxAndItsTable) {
-  const auto dir = std::filesystem::temp_directory_path() /
-                   ("twinforge_fusion_test_" + std::to_string(::getpid()));
-  std::filesystem::remove_all(dir);
+  const auto dir = core::testing::TestDir("fusion_test");
   testing::SyntheticScan(dir, R"(<mujoco><compiler angle="radian"/><worldbody>
       <geom type="box" pos="0.5 0 -0.02" size="0.8 0.8 0.02" rgba="0.7 0.7 0.7 1"/>
       <geom type="box" pos="0.6 0.05 0.05" size="0.1 0.075 0.05" euler="0 0 0.3"

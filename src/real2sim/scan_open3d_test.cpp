@@ -2,8 +2,8 @@
 // surface that lies on the (hidden) scene: the layout, units and pose conventions are right.
 #include <gtest/gtest.h>
 #include <open3d/Open3D.h>
-#include <unistd.h>
 
+#include "core/test_support.h"
 #include "real2sim/mesh.h"
 #include "reality/proxy_reality.h"
 #include "reality/scan.h"
@@ -19,9 +19,7 @@ TEST(ScanLayout, Open3dReadsAndFusesIt) {
   options.width = 320;
   options.height = 240;
   options.frames_per_ring = 6;
-  const auto dir = std::filesystem::temp_directory_path() /
-                   ("twinforge_scan_open3d_" + std::to_string(::getpid()));
-  std::filesystem::remove_all(dir);
+  const auto dir = core::testing::TestDir("scan_open3d");
   const auto path = reality::ScanPath(sim::LoadTaskSpec("open_drawer"), options);
   reality::CaptureScan(proxy, path, reality::ScanIntrinsics(options), dir);
 

@@ -1,8 +1,8 @@
 #include "real2sim/segment.h"
 
 #include <gtest/gtest.h>
-#include <unistd.h>
 
+#include "core/test_support.h"
 #include "real2sim/test_scenes.h"
 
 namespace twinforge::real2sim {
@@ -11,8 +11,7 @@ namespace {
 // A chest-sized fixture and a mug-sized object on a table come apart: two segments of the right
 // kinds and sizes, each with its own mesh within the budget; the table is the static scene.
 TEST(Segment, SplitsAFixtureAndAMovableObject) {
-  const auto dir = std::filesystem::temp_directory_path() /
-                   ("twinforge_segment_test_" + std::to_string(::getpid()));
+  const auto dir = core::testing::TestDir("segment_test");
   testing::SyntheticScan(dir, R"(<mujoco><worldbody>
       <geom type="box" pos="0.5 0 -0.02" size="0.8 0.8 0.02" rgba="0.7 0.7 0.7 1"/>
       <geom type="box" pos="0.75 -0.1 0.1" size="0.17 0.17 0.1" rgba="0.6 0.45 0.3 1"/>

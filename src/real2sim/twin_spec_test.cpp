@@ -2,18 +2,17 @@
 
 #include <gtest/gtest.h>
 #include <open3d/Open3D.h>
-#include <unistd.h>
 
 #include <fstream>
 #include <map>
+
+#include "core/test_support.h"
 
 namespace twinforge::real2sim {
 namespace {
 
 std::filesystem::path TwinDir(const std::string& name) {
-  const auto dir = std::filesystem::temp_directory_path() /
-                   ("twinforge_twin_spec_" + std::to_string(::getpid())) / name;
-  std::filesystem::remove_all(dir);
+  const auto dir = core::testing::TestDir("twin_spec", name);
   std::filesystem::create_directories(dir / "meshes");
   return dir;
 }

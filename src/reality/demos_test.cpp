@@ -4,6 +4,7 @@
 
 #include <filesystem>
 
+#include "core/test_support.h"
 #include "reality/test_support.h"
 
 namespace twinforge::reality {
@@ -12,11 +13,9 @@ namespace {
 using namespace std::chrono_literals;
 
 std::filesystem::path TempPath(const std::string& name) {
-  const auto dir = std::filesystem::temp_directory_path() /
-                   ("twinforge_demos_test_" + std::to_string(::getpid()));
-  std::filesystem::create_directories(dir);
-  std::filesystem::remove(dir / name);
-  return dir / name;
+  const auto path = core::testing::TestDir("demos_test", name);
+  std::filesystem::create_directories(path.parent_path());
+  return path;
 }
 
 // Demos recorded through the bridge with the world's own operator land in robomimic layout and,

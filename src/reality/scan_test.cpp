@@ -1,22 +1,19 @@
 #include "reality/scan.h"
 
 #include <gtest/gtest.h>
-#include <unistd.h>
 
 #include <fstream>
 
 #include "core/error.h"
 #include "core/image.h"
+#include "core/test_support.h"
 #include "reality/proxy_reality.h"
 
 namespace twinforge::reality {
 namespace {
 
 std::filesystem::path TempDir(const std::string& name) {
-  const auto dir = std::filesystem::temp_directory_path() /
-                   ("twinforge_scan_test_" + std::to_string(::getpid())) / name;
-  std::filesystem::remove_all(dir);
-  return dir;
+  return core::testing::TestDir("scan_test", name);
 }
 
 TEST(ScanPath, LooksAtTheSceneFromRingsAroundIt) {

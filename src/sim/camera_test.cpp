@@ -1,11 +1,11 @@
 #include "sim/camera.h"
 
 #include <gtest/gtest.h>
-#include <unistd.h>
 
 #include <filesystem>
 
 #include "core/fs.h"
+#include "core/test_support.h"
 #include "sim/env.h"
 
 namespace twinforge::sim {
@@ -13,8 +13,7 @@ namespace {
 
 // A task whose scene is one box (half-size 5 cm at x = 0.55 m, z = 0.1 m) and no table.
 std::shared_ptr<const Task> BoxTask() {
-  const auto dir = std::filesystem::temp_directory_path() /
-                   ("twinforge_camera_test_" + std::to_string(::getpid()));
+  const auto dir = core::testing::TestDir("camera_test");
   core::WriteFileAtomic(dir / "scene.xml", R"(<mujoco>
   <worldbody>
     <body name="block" pos="0.55 0 0.1">

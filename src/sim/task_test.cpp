@@ -1,13 +1,13 @@
 #include "sim/task.h"
 
 #include <gtest/gtest.h>
-#include <unistd.h>
 
 #include <filesystem>
 #include <fstream>
 
 #include "core/error.h"
 #include "core/fs.h"
+#include "core/test_support.h"
 
 namespace twinforge::sim {
 namespace {
@@ -16,9 +16,7 @@ namespace {
 std::string ErrorOfEditedDrawerTask(const std::string& replace, const std::string& with) {
   const auto source = std::filesystem::path(TWINFORGE_ASSETS_DIR) / "tasks/open_drawer";
   // One directory per test process: ctest runs these tests in parallel processes.
-  const auto dir = std::filesystem::temp_directory_path() /
-                   ("twinforge_task_test_" + std::to_string(::getpid()));
-  std::filesystem::remove_all(dir);
+  const auto dir = core::testing::TestDir("task_test");
   std::filesystem::create_directories(dir);
   std::filesystem::copy_file(source / "scene.xml", dir / "scene.xml");
   std::string text = core::ReadTextFile(source / "task.yaml");
