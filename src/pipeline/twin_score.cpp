@@ -169,9 +169,7 @@ TwinScore ScoreTwin(const std::filesystem::path& twin_dir, const std::filesystem
     for (const auto& tj : twin.joints) {
       if (tj.name != name) continue;
       j.found = true;
-      j.twin_type = tj.type == real2sim::JointType::kRevolute    ? "revolute"
-                    : tj.type == real2sim::JointType::kPrismatic ? "prismatic"
-                                                                 : "fixed";
+      j.twin_type = real2sim::ToString(tj.type);
       j.twin_axis = tj.axis;
       j.axis_deg = DegreesBetween(axis, Eigen::Vector3d(tj.axis.data()));
       j.limit_error = std::abs(tj.range[1] - m->jnt_range[2 * id + 1]);

@@ -75,7 +75,7 @@ nlohmann::json BuildTwin(const std::filesystem::path& scan_dir, const std::files
       const MovingPart moving = FindMovingPart(segmentation, e, fusion.mesh, after.mesh);
       AddMovingPart(spec, moving, e, moving.segment + "_moving", moving.segment + "_joint", out);
       articulation = {{"segment", moving.segment},
-                      {"type", e.type == JointType::kRevolute ? "revolute" : "prismatic"},
+                      {"type", ToString(e.type)},
                       {"axis", {e.axis.x(), e.axis.y(), e.axis.z()}},
                       {"origin", {e.origin.x(), e.origin.y(), e.origin.z()}},
                       {"amount", e.amount},
@@ -83,7 +83,7 @@ nlohmann::json BuildTwin(const std::filesystem::path& scan_dir, const std::files
                       {"rmse", e.rmse},
                       {"moved_points", {e.moved_before.size(), e.moved_after.size()}}};
       spdlog::info("twin: {} moves in {}: {} by {:.3f}, fitness {:.2f}", moving.segment + "_moving",
-                   moving.segment, articulation["type"].get<std::string>(), e.amount, e.fitness);
+                   moving.segment, ToString(e.type), e.amount, e.fitness);
     }
     if (options.task) ApplyRecipe(spec, options.task->twin, out, options.task->file.string());
   }

@@ -240,8 +240,7 @@ void ApplyRecipe(TwinSpec& spec, const sim::TwinRecipe& recipe,
     const JointType type = want.type == "revolute" ? JointType::kRevolute : JointType::kPrismatic;
     if (joint->type != type)
       spdlog::warn("twin: the scans show a {} joint where the recipe expects {} for '{}'",
-                   joint->type == JointType::kRevolute ? "revolute" : "prismatic", want.type,
-                   want.name);
+                   ToString(joint->type), want.type, want.name);
     joint->name = want.name;
     joint->damping = want.damping;
     joint->frictionloss = want.frictionloss;

@@ -19,6 +19,18 @@ bool BoxSpec::Contains(const Eigen::Vector3d& p) const {
   return true;
 }
 
+const char* ToString(JointType type) {
+  switch (type) {
+    case JointType::kFixed:
+      return "fixed";
+    case JointType::kPrismatic:
+      return "prismatic";
+    case JointType::kRevolute:
+      return "revolute";
+  }
+  return "?";
+}
+
 Mesh BoxMesh(const BoxSpec& box) {
   Mesh mesh;
   const core::Pose pose = box.pose();

@@ -89,6 +89,7 @@ struct PartSpec {
 };
 
 enum class JointType { kFixed, kPrismatic, kRevolute };
+const char* ToString(JointType type);  // "fixed", "prismatic", "revolute" (as in twin.yaml)
 
 struct JointSpec {
   std::string name;
