@@ -26,11 +26,13 @@ std::string DistractorBodies(int count) {
 }  // namespace
 
 TaskSpec LoadTaskSpec(const std::string& name_or_path) {
+  // A file; a directory holding task.yaml (a twin's); else a built-in task's name.
   std::filesystem::path path(name_or_path);
-  if (!std::filesystem::exists(path) && path.extension().empty() &&
-      std::filesystem::exists(TasksDir() / name_or_path / "task.yaml"))
+  if (std::filesystem::is_directory(path)) path /= "task.yaml";
+  if (!std::filesystem::is_regular_file(path) &&
+      std::filesystem::is_regular_file(TasksDir() / name_or_path / "task.yaml"))
     path = TasksDir() / name_or_path / "task.yaml";
-  if (!std::filesystem::exists(path)) {
+  if (!std::filesystem::is_regular_file(path)) {
     std::string known;
     for (const auto& t : BuiltinTasks()) known += (known.empty() ? "" : ", ") + t;
     throw core::IoError("no task file or built-in task named '" + name_or_path +

@@ -32,6 +32,23 @@ std::string ErrorOfEditedDrawerTask(const std::string& replace, const std::strin
   return "";
 }
 
+// A directory holding task.yaml (a twin's) loads as that task; one named like a built-in task
+// but without task.yaml (a run's output) does not hide the built-in task.
+TEST(Task, ADirectoryLoadsItsTaskFileAndDoesNotHideABuiltinTask) {
+  const auto dir = core::testing::TestDir("task_test", "directories");
+  std::filesystem::create_directories(dir / "open_drawer" / "scan");
+  std::filesystem::create_directories(dir / "twin");
+  const auto source = std::filesystem::path(TWINFORGE_ASSETS_DIR) / "tasks/mug_on_shelf";
+  std::filesystem::copy_file(source / "task.yaml", dir / "twin" / "task.yaml");
+  const auto cwd = std::filesystem::current_path();
+  std::filesystem::current_path(dir);
+  EXPECT_EQ(LoadTaskSpec("open_drawer").name, "open_drawer");
+  EXPECT_EQ(LoadTaskSpec("twin").name, "mug_on_shelf");
+  EXPECT_THROW(LoadTaskSpec("no_such_task"), core::IoError);
+  std::filesystem::current_path(cwd);
+  std::filesystem::remove_all(dir);
+}
+
 TEST(Task, BuiltinTasksLoad) {
   const auto names = BuiltinTasks();
   for (const char* expected : {"open_drawer", "open_cabinet", "mug_on_shelf", "peg_insertion"})
