@@ -136,7 +136,9 @@ TwinScore ScoreTwin(const std::filesystem::path& twin_dir, const std::filesystem
       for (const auto& part : twin.parts)
         if (part.name == part_name) {
           real2sim::Mesh mesh = real2sim::PartMesh(part, twin_dir);
-          for (const auto& box : part.boxes) real2sim::AppendMesh(mesh, real2sim::BoxMesh(box));
+          // What is seen: the scan and the boxes added to it, not the solids fitted to it.
+          for (const auto& box : part.boxes)
+            if (!box.hidden) real2sim::AppendMesh(mesh, real2sim::BoxMesh(box));
           const int count = std::max(100, int(mesh.Area() * options.density));
           const Points p = real2sim::SampleSurface(mesh, count, 7);
           twin_points.insert(twin_points.end(), p.begin(), p.end());

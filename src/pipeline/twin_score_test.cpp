@@ -1,6 +1,6 @@
-// End to end on the proxy worlds: two scans through the robot interface (the second after the
-// world's operator has opened the part), `twin build` with the task, the grader, and the task's
-// expert in the rebuilt twin.
+// End to end on the four proxy worlds: a scan through the robot interface (and, for a world
+// with a joint, a second after the world's operator has opened the part), `twin build` with the
+// task, the grader, and the task's expert in the rebuilt twin.
 #include "pipeline/twin_score.h"
 
 #include <gtest/gtest.h>
@@ -17,8 +17,9 @@ namespace {
 
 struct Case {
   const char* world;
-  const char* type;
+  const char* type;  // the task joint's type; "" for a world of free objects (one scan)
 };
+void PrintTo(const Case& c, std::ostream* os) { *os << c.world; }
 
 class TwinFromScans : public ::testing::TestWithParam<Case> {};
 
@@ -33,7 +34,8 @@ TEST_P(TwinFromScans, TheRebuiltTwinMeetsTheTargetsAndTheExpertStillSucceeds) {
     reality::ProxyReality reality(world);
     reality::CaptureScan(reality, path, reality::ScanIntrinsics(scan), dir / "closed");
   }
-  {
+  const bool articulated = *c.type != '\0';
+  if (articulated) {
     reality::ProxyReality reality(world);
     reality::RobotOperator op(reality);
     EXPECT_GT(reality::OperateThenHome(reality, op, task), 10);
@@ -45,7 +47,7 @@ TEST_P(TwinFromScans, TheRebuiltTwinMeetsTheTargetsAndTheExpertStillSucceeds) {
     reality::CaptureScan(reality, path, reality::ScanIntrinsics(scan), dir / "open");
   }
   real2sim::BuildOptions options;
-  options.scan_after = dir / "open";
+  if (articulated) options.scan_after = dir / "open";
   options.task = task;
   real2sim::BuildTwin(dir / "closed", dir / "twin", options);
 
@@ -53,9 +55,11 @@ TEST_P(TwinFromScans, TheRebuiltTwinMeetsTheTargetsAndTheExpertStillSucceeds) {
   std::printf("%s: %s\n", c.world, score.ToJson().dump().c_str());
   EXPECT_TRUE(score.pass);
   EXPECT_LE(score.mean_chamfer_mm, 5);
-  ASSERT_EQ(score.joints.size(), 1u);
-  EXPECT_EQ(score.joints[0].twin_type, c.type);
-  EXPECT_LE(score.joints[0].axis_deg, 3);
+  if (articulated) {
+    ASSERT_EQ(score.joints.size(), 1u);
+    EXPECT_EQ(score.joints[0].twin_type, c.type);
+    EXPECT_LE(score.joints[0].axis_deg, 3);
+  }
 
   auto twin_task =
       std::make_shared<const sim::Task>(sim::LoadTaskSpec((dir / "twin" / "task.yaml").string()));
@@ -67,7 +71,8 @@ TEST_P(TwinFromScans, TheRebuiltTwinMeetsTheTargetsAndTheExpertStillSucceeds) {
 
 INSTANTIATE_TEST_SUITE_P(ProxyWorlds, TwinFromScans,
                          ::testing::Values(Case{"open_drawer", "prismatic"},
-                                           Case{"open_cabinet", "revolute"}),
+                                           Case{"open_cabinet", "revolute"},
+                                           Case{"mug_on_shelf", ""}, Case{"peg_insertion", ""}),
                          [](const auto& info) { return std::string(info.param.world); });
 
 }  // namespace

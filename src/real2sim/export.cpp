@@ -113,6 +113,41 @@ std::vector<AlignedBox> CoverWithBoxes(const std::vector<Eigen::Vector3d>& point
     }
   return boxes;
 }
+namespace {
+
+// Boxes (body frame) covering a part's scanned surface, on the finest grid from
+// `options.collision_voxel` up that fits `options.max_boxes`; `voxel` gets the grid used.
+std::vector<AlignedBox> CoverScan(const Mesh& mesh, const core::Pose& to_body, double area,
+                                  const ExportOptions& options, double& voxel_used) {
+  std::vector<AlignedBox> boxes;
+  for (double voxel = options.collision_voxel;; voxel *= 1.25) {
+    const double spacing = voxel / 3;
+    const int count = static_cast<int>(std::clamp(area / (spacing * spacing), 2000.0, 400000.0));
+    std::vector<Eigen::Vector3d> normals;
+    std::vector<Eigen::Vector3d> points = SampleSurface(mesh, count, 11, &normals);
+    for (auto& p : points) p = to_body * p;
+    for (auto& n : normals) n = to_body.rotation * n;
+    boxes = CoverWithBoxes(points, normals, voxel);
+    voxel_used = voxel;
+    if (static_cast<int>(boxes.size()) <= options.max_boxes) break;
+    if (voxel * 1.25 > options.max_collision_voxel) {
+      // A scanned surface has specks no coarser grid gets rid of: keep the largest faces.
+      std::sort(boxes.begin(), boxes.end(), [](const AlignedBox& x, const AlignedBox& y) {
+        auto face = [](const AlignedBox& box) {
+          Eigen::Vector3d h = box.half;
+          std::sort(h.data(), h.data() + 3);
+          return h[1] * h[2];
+        };
+        return face(x) > face(y);
+      });
+      boxes.resize(options.max_boxes);
+      break;
+    }
+  }
+  return boxes;
+}
+
+}  // namespace
 
 ExportReport ExportMjcf(const TwinSpec& spec, const std::filesystem::path& twin_dir,
                         const ExportOptions& options) {
@@ -137,32 +172,11 @@ ExportReport ExportMjcf(const TwinSpec& spec, const std::filesystem::path& twin_
     const UprightBounds bounds = UprightBox(dense);
     b.pose = {bounds.yaw * (0.5 * (bounds.lo + bounds.hi)), bounds.yaw};
     b.half = 0.5 * (bounds.hi - bounds.lo);
-    // Collision boxes on a grid coarse enough for the budget.
+    // Collision boxes on a grid coarse enough for the budget (none when the part collides as
+    // fitted solids).
     const core::Pose to_body = b.pose.Inverse();
-    for (double voxel = options.collision_voxel;; voxel *= 1.25) {
-      const double spacing = voxel / 3;
-      const int count = static_cast<int>(std::clamp(area / (spacing * spacing), 2000.0, 400000.0));
-      std::vector<Eigen::Vector3d> normals;
-      std::vector<Eigen::Vector3d> points = SampleSurface(b.mesh, count, 11, &normals);
-      for (auto& p : points) p = to_body * p;
-      for (auto& n : normals) n = to_body.rotation * n;
-      b.boxes = CoverWithBoxes(points, normals, voxel);
-      report.voxel[b.part->name] = voxel;
-      if (static_cast<int>(b.boxes.size()) <= options.max_boxes) break;
-      if (voxel * 1.25 > options.max_collision_voxel) {
-        // A scanned surface has specks no coarser grid gets rid of: keep the largest faces.
-        std::sort(b.boxes.begin(), b.boxes.end(), [](const AlignedBox& x, const AlignedBox& y) {
-          auto face = [](const AlignedBox& box) {
-            Eigen::Vector3d h = box.half;
-            std::sort(h.data(), h.data() + 3);
-            return h[1] * h[2];
-          };
-          return face(x) > face(y);
-        });
-        b.boxes.resize(options.max_boxes);
-        break;
-      }
-    }
+    if (b.part->collision == PartSpec::Collision::kScan)
+      b.boxes = CoverScan(b.mesh, to_body, area, options, report.voxel[b.part->name]);
     report.boxes[b.part->name] = static_cast<int>(b.boxes.size());
     // The visual mesh, in the body frame.
     Mesh local = b.mesh;
@@ -235,12 +249,29 @@ ExportReport ExportMjcf(const TwinSpec& spec, const std::filesystem::path& twin_
     xml << pad << "  <geom name=\"" << p.name << "_visual\" class=\"twin_visual\" mesh=\"" << p.name
         << "_visual\" rgba=\"" << Vec(colour) << " 1\"/>\n";
     for (std::size_t k = 0; k < p.boxes.size(); ++k) {
-      const core::Pose box = b.pose.Inverse() * p.boxes[k].pose();
-      const Eigen::Vector3d half = 0.5 * Eigen::Vector3d(p.boxes[k].size.data());
+      const BoxSpec& solid = p.boxes[k];
+      const core::Pose box = b.pose.Inverse() * solid.pose();
+      const Eigen::Vector3d half = 0.5 * Eigen::Vector3d(solid.size.data());
+      const bool cylinder = solid.shape == SolidShape::kCylinder;
       xml << pad << "  <geom name=\"" << p.name << "_box" << k
-          << "\" class=\"twin_collision\" pos=\"" << Vec(box.translation) << "\" quat=\""
-          << Quat(box.rotation) << "\" size=\"" << Vec(half) << "\" rgba=\"" << Vec(colour)
-          << " 1\" group=\"2\" friction=\"" << p.friction << " 0.005 0.0001\"/>\n";
+          << "\" class=\"twin_collision\" type=\"" << (cylinder ? "cylinder" : "box") << "\" pos=\""
+          << Vec(box.translation) << "\" quat=\"" << Quat(box.rotation) << "\" size=\""
+          << (cylinder ? sim::FormatNumbers(Eigen::Vector2d(half.x(), half.z()).data(), 2)
+                       : Vec(half))
+          << "\"";
+      if (!solid.hidden) xml << " rgba=\"" << Vec(colour) << " 1\" group=\"2\"";
+      xml << " friction=\"" << p.friction << " 0.005 0.0001\"/>\n";
+      if (cylinder) {
+        // MuJoCo 2.2 gives a cylinder one contact with a flat face, so it rocks and tips where
+        // it is set down; box-box gives several. It stands on a thin box inside its base.
+        const double foot = 0.002;
+        const Eigen::Vector3d at = box * Eigen::Vector3d(0, 0, foot - half.z());
+        xml << pad << "  <geom name=\"" << p.name << "_box" << k
+            << "_foot\" class=\"twin_collision\" pos=\"" << Vec(at) << "\" quat=\""
+            << Quat(box.rotation) << "\" size=\""
+            << Vec(Eigen::Vector3d(half.x() / std::sqrt(2.0), half.x() / std::sqrt(2.0), foot))
+            << "\" friction=\"" << p.friction << " 0.005 0.0001\"/>\n";
+      }
     }
     for (std::size_t k = 0; k < b.boxes.size(); ++k)
       xml << pad << "  <geom name=\"" << p.name << "_c" << k << "\" class=\"twin_collision\" pos=\""

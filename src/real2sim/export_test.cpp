@@ -3,7 +3,10 @@
 #include <gtest/gtest.h>
 #include <open3d/Open3D.h>
 
+#include <random>
+
 #include "core/test_support.h"
+#include "real2sim/recipe.h"
 #include "sim/mjcf.h"
 #include "sim/model.h"
 #include "sim/robot.h"
@@ -146,6 +149,123 @@ TEST(Export, BoxCoverOfAHollowShellStaysHollow) {
     EXPECT_FALSE((b.centre.array().abs() < b.half.array()).all()) << "a box covers the centre";
   }
   EXPECT_LT(volume, 0.5 * 0.2 * 0.2 * 0.2) << "a shell, not a solid";
+}
+
+// A scan's blur: every vertex moved by Gaussian noise of `sigma` m per axis.
+Mesh Blurred(Mesh mesh, double sigma, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> noise(0, sigma);
+  for (auto& v : mesh.vertices) v += Eigen::Vector3d(noise(rng), noise(rng), noise(rng));
+  return mesh;
+}
+
+// Runs the scene `seconds` with the arm held; returns the body's position and the cosine of its
+// tilt from upright.
+std::pair<Eigen::Vector3d, double> Settle(const sim::ModelPtr& m, const sim::DataPtr& d,
+                                          const char* body, double seconds) {
+  for (int i = 0; i < m->nu; ++i) d->ctrl[i] = 0;
+  for (int s = 0; s < int(seconds / m->opt.timestep); ++s) mj_step(m.get(), d.get());
+  const int b = mj_name2id(m.get(), mjOBJ_BODY, body);
+  return {Eigen::Vector3d(d->xpos + 3 * b), d->xmat[9 * b + 8]};
+}
+
+// A 2 cm peg and a block with a hole 1.5 mm wider a side, scanned with a mm of noise. Fitted
+// as boxes (recipe shape "box", the block with the drawing's hole through it), the peg set on
+// the hole goes down it.
+TEST(Export, APegGoesDownTheHoleOfItsFittedBlock) {
+  const auto dir = core::testing::TestDir("export", "peg");
+  const double side = 0.063, hole = 0.023, wall = 0.5 * (side - hole), h = 0.04;
+  const double bx = 0.5 - side / 2, by = 0.15 - side / 2;
+  WriteMesh(dir / "meshes/block.ply",
+            Blurred(Panels({{{bx, by, 0}, {wall, side, h}},
+                            {{bx + side - wall, by, 0}, {wall, side, h}},
+                            {{bx + wall, by, 0}, {hole, wall, h}},
+                            {{bx + wall, by + side - wall, 0}, {hole, wall, h}}}),
+                    0.001, 1));
+  WriteMesh(dir / "meshes/peg.ply",
+            Blurred(Panels({{{0.49, -0.21, 0}, {0.02, 0.02, 0.09}}}), 0.001, 2));
+  TwinSpec spec;
+  for (const char* name : {"block", "peg"}) {
+    PartSpec part;
+    part.name = std::string("object_") + name;
+    part.mesh = std::string("meshes/") + name + ".ply";
+    spec.parts.push_back(part);
+  }
+  sim::TwinRecipe recipe;
+  recipe.parts.resize(2);
+  recipe.parts[0].name = "peg";
+  recipe.parts[0].size = {0.02, 0.02, 0.09};
+  recipe.parts[0].shape = "box";
+  recipe.parts[0].mass = 0.06;
+  recipe.parts[1].name = "hole_block";
+  recipe.parts[1].size = {0.063, 0.063, 0.04};
+  recipe.parts[1].shape = "box";
+  recipe.parts[1].hole = {hole, hole, 0};
+  recipe.parts[1].mass = 1.2;
+  recipe.sites.resize(2);
+  recipe.sites[0].name = "peg_tip";
+  recipe.sites[0].part = "peg";
+  recipe.sites[0].box = {0, 0, -1};
+  recipe.sites[1].name = "hole_top";
+  recipe.sites[1].part = "hole_block";
+  recipe.sites[1].box = {0, 0, 1};
+  ApplyRecipe(spec, recipe, dir, "test recipe");
+  ASSERT_EQ(spec.parts[1].name, "peg");
+  EXPECT_EQ(spec.parts[1].collision, PartSpec::Collision::kSolids);
+  EXPECT_EQ(spec.parts[0].boxes.size(), 4u) << "four walls around a hole through";
+  const ExportReport report = ExportMjcf(spec, dir);
+  EXPECT_EQ(report.boxes.at("peg"), 0) << "no boxes over the scan";
+
+  const sim::ModelPtr m = LoadWithRobot(report.scene);
+  const sim::DataPtr d = sim::MakeData(m.get());
+  mj_forward(m.get(), d.get());
+  const int tip = mj_name2id(m.get(), mjOBJ_SITE, "peg_tip");
+  const int top = mj_name2id(m.get(), mjOBJ_SITE, "hole_top");
+  // The peg's tip 1 cm over the hole.
+  const int peg = m->jnt_qposadr[mj_name2id(m.get(), mjOBJ_JOINT, "peg_free")];
+  for (int k = 0; k < 3; ++k)
+    d->qpos[peg + k] += d->site_xpos[3 * top + k] - d->site_xpos[3 * tip + k] + (k == 2) * 0.01;
+  mj_forward(m.get(), d.get());
+  Settle(m, d, "peg", 1.0);
+  EXPECT_LT(d->site_xpos[3 * tip + 2], d->site_xpos[3 * top + 2] - 0.03) << "down the hole";
+  EXPECT_LT(std::hypot(d->site_xpos[3 * tip] - d->site_xpos[3 * top],
+                       d->site_xpos[3 * tip + 1] - d->site_xpos[3 * top + 1]),
+            0.003);
+}
+
+// A mug's body fitted as a cylinder (recipe shape "cylinder") stands where it is set down:
+// MuJoCo 2.2 gives a cylinder one contact with the table, so it stands on a thin box.
+TEST(Export, AFittedCylinderStandsStill) {
+  const auto dir = core::testing::TestDir("export", "cylinder");
+  auto cylinder = open3d::geometry::TriangleMesh::CreateCylinder(0.04, 0.09, 40, 8);
+  cylinder->Translate(Eigen::Vector3d(0.5, -0.15, 0.045));
+  WriteMesh(dir / "meshes/mug.ply",
+            Blurred({cylinder->vertices_, {}, cylinder->triangles_}, 0.001, 3));
+  TwinSpec spec;
+  spec.parts.resize(1);
+  spec.parts[0].name = "object_0";
+  spec.parts[0].mesh = "meshes/mug.ply";
+  sim::TwinRecipe recipe;
+  recipe.parts.resize(1);
+  recipe.parts[0].name = "mug";
+  recipe.parts[0].size = {0.08, 0.08, 0.09};
+  recipe.parts[0].shape = "cylinder";
+  recipe.parts[0].mass = 0.3;
+  ApplyRecipe(spec, recipe, dir, "test recipe");
+  ASSERT_EQ(spec.parts[0].boxes.size(), 1u);
+  EXPECT_NEAR(spec.parts[0].boxes[0].size[0], 0.08, 0.002);
+  const sim::ModelPtr m = LoadWithRobot(ExportMjcf(spec, dir).scene);
+  const sim::DataPtr d = sim::MakeData(m.get());
+  const int mug = m->jnt_qposadr[mj_name2id(m.get(), mjOBJ_JOINT, "mug_free")];
+  // Let go of 1.5 cm over the table, tilted 3 deg, as a gripper lets go of it.
+  const Eigen::Vector3d start(d->qpos + mug);
+  d->qpos[mug + 2] += 0.015;
+  const core::Quat tilt = core::AxisAngle(Eigen::Vector3d::UnitX(), 3 * M_PI / 180);
+  core::QuatToMj(core::QuatFromMj(d->qpos + mug + 3) * tilt, d->qpos + mug + 3);
+  mj_forward(m.get(), d.get());
+  const auto [at, upright] = Settle(m, d, "mug", 1.5);
+  EXPECT_GT(upright, std::cos(0.5 * M_PI / 180)) << "tilted";
+  EXPECT_LT((at - start).head<2>().norm(), 0.003) << "slid or rolled";
 }
 
 }  // namespace

@@ -3,6 +3,8 @@
 #include <open3d/Open3D.h>
 
 #include <numeric>
+#include <random>
+#include <tuple>
 
 #include "core/error.h"
 #include "core/fs.h"
@@ -179,6 +181,141 @@ UprightBounds UprightBox(const std::vector<Eigen::Vector3d>& points) {
     b.lo = b.lo.cwiseMin(q);
     b.hi = b.hi.cwiseMax(q);
   }
+  return b;
+}
+
+namespace {
+
+// The value below which a `fraction` of `v` lies.
+double Quantile(std::vector<double> v, double fraction) {
+  const auto k = static_cast<std::ptrdiff_t>(fraction * double(v.size() - 1));
+  std::nth_element(v.begin(), v.begin() + k, v.end());
+  return v[k];
+}
+
+// Top and bottom of points (in an upright frame, within `b`'s footprint and height). The top is
+// the median height of the points on it (in the top eighth, away from the footprint's edge);
+// with too few (an open top, a mug's), the 98th percentile of all heights. The bottom is the
+// floor when within `rest` of it, else read the same way from below.
+void FitTopAndBottom(const std::vector<Eigen::Vector3d>& local, double floor, double rest,
+                     bool round, UprightBounds& b) {
+  const Eigen::Vector3d mid = 0.5 * (b.lo + b.hi), half = 0.5 * (b.hi - b.lo);
+  const double h = b.hi.z() - b.lo.z();
+  auto inner = [&](const Eigen::Vector3d& q) {
+    const Eigen::Vector2d u((q.x() - mid.x()) / std::max(1e-9, half.x()),
+                            (q.y() - mid.y()) / std::max(1e-9, half.y()));
+    return (round ? u.norm() : u.lpNorm<Eigen::Infinity>()) < 0.8;
+  };
+  std::vector<double> all, top, bottom;
+  for (const auto& q : local) {
+    all.push_back(q.z());
+    if (!inner(q)) continue;
+    if (q.z() > b.hi.z() - h / 8) top.push_back(q.z());
+    if (q.z() < b.lo.z() + h / 8) bottom.push_back(q.z());
+  }
+  const std::size_t enough = std::max<std::size_t>(10, local.size() / 50);
+  b.hi.z() = top.size() >= enough ? Quantile(top, 0.5) : Quantile(all, 0.98);
+  if (b.lo.z() - floor < rest)
+    b.lo.z() = floor;
+  else
+    b.lo.z() = bottom.size() >= enough ? Quantile(bottom, 0.5) : Quantile(all, 0.02);
+}
+
+}  // namespace
+
+UprightBounds FitUprightBox(const std::vector<Eigen::Vector3d>& points, double floor, double rest) {
+  UprightBounds b = UprightBox(points);
+  if (points.empty()) return b;
+  std::vector<Eigen::Vector3d> local;
+  for (const auto& p : points) local.push_back(b.yaw.inverse() * p);
+  // Each point of the middle half of the height goes to the nearest side face; a face moves to
+  // the median of its points. From the bounds, three times: the first guess is wide.
+  const double mid_z = 0.5 * (b.lo.z() + b.hi.z()), quarter = 0.25 * (b.hi.z() - b.lo.z());
+  for (int round = 0; round < 3; ++round) {
+    const Eigen::Vector3d half = 0.5 * (b.hi - b.lo);
+    std::vector<double> faces[2][2];  // [axis][side]
+    for (const auto& q : local) {
+      if (std::abs(q.z() - mid_z) > quarter) continue;
+      int axis = 0, side = 0;
+      double nearest = 1e300;
+      for (int a = 0; a < 2; ++a)
+        for (int s = 0; s < 2; ++s) {
+          const double d = std::abs(q[a] - (s ? b.hi[a] : b.lo[a]));
+          if (d < nearest) std::tie(nearest, axis, side) = std::make_tuple(d, a, s);
+        }
+      if (nearest > 0.5 * half[axis]) continue;  // inside: a hole's walls
+      faces[axis][side].push_back(q[axis]);
+    }
+    for (int axis = 0; axis < 2; ++axis) {
+      if (!faces[axis][0].empty()) b.lo[axis] = Quantile(faces[axis][0], 0.5);
+      if (!faces[axis][1].empty()) b.hi[axis] = Quantile(faces[axis][1], 0.5);
+    }
+  }
+  FitTopAndBottom(local, floor, rest, false, b);
+  return b;
+}
+
+UprightBounds FitUprightCylinder(const std::vector<Eigen::Vector3d>& points, double floor,
+                                 double rest, double outlier) {
+  UprightBounds b = UprightBox(points);
+  b.yaw = core::Quat::Identity();
+  if (points.empty()) return b;
+  b.lo = Eigen::Vector3d::Constant(1e300);
+  b.hi = -b.lo;
+  for (const auto& p : points) {
+    b.lo = b.lo.cwiseMin(p);
+    b.hi = b.hi.cwiseMax(p);
+  }
+  const double mid = 0.5 * (b.lo.z() + b.hi.z()), quarter = 0.25 * (b.hi.z() - b.lo.z());
+  std::vector<Eigen::Vector2d> ring;
+  for (const auto& p : points)
+    if (std::abs(p.z() - mid) <= quarter) ring.push_back(p.head<2>());
+  // The circle through three of the points that the most points lie within `outlier` of
+  // (RANSAC, a fixed seed), then refitted by least squares (Kasa: x^2 + y^2 = 2 a x + 2 b y + c)
+  // to those points, twice.
+  Eigen::Vector2d centre = 0.5 * (b.lo + b.hi).head<2>();
+  double radius = 0.25 * (b.hi - b.lo).head<2>().sum();
+  auto inliers = [&](const Eigen::Vector2d& c, double r) {
+    std::vector<std::size_t> near;
+    for (std::size_t i = 0; i < ring.size(); ++i)
+      if (std::abs((ring[i] - c).norm() - r) <= outlier) near.push_back(i);
+    return near;
+  };
+  if (ring.size() >= 3) {
+    std::mt19937 rng(1);
+    std::uniform_int_distribution<std::size_t> pick(0, ring.size() - 1);
+    std::size_t best = 0;
+    for (int trial = 0; trial < 300; ++trial) {
+      const Eigen::Vector2d p = ring[pick(rng)], q = ring[pick(rng)], r = ring[pick(rng)];
+      // The centre is where the perpendicular bisectors of pq and pr meet.
+      Eigen::Matrix2d A;
+      A << (q - p).transpose(), (r - p).transpose();
+      if (std::abs(A.determinant()) < 1e-12) continue;
+      const Eigen::Vector2d rhs(0.5 * (q.squaredNorm() - p.squaredNorm()),
+                                0.5 * (r.squaredNorm() - p.squaredNorm()));
+      const Eigen::Vector2d c = A.inverse() * rhs;
+      const double rad = (p - c).norm();
+      const std::size_t count = inliers(c, rad).size();
+      if (count > best) std::tie(best, centre, radius) = std::make_tuple(count, c, rad);
+    }
+    for (int round = 0; round < 2; ++round) {
+      const auto near = inliers(centre, radius);
+      if (near.size() < 3) break;
+      Eigen::MatrixXd A(near.size(), 3);
+      Eigen::VectorXd y(near.size());
+      for (std::size_t k = 0; k < near.size(); ++k) {
+        const Eigen::Vector2d& p = ring[near[k]];
+        A.row(k) << 2 * p.x(), 2 * p.y(), 1;
+        y[k] = p.squaredNorm();
+      }
+      const Eigen::Vector3d s = A.colPivHouseholderQr().solve(y);
+      centre = s.head<2>();
+      radius = std::sqrt(std::max(0.0, s.z() + centre.squaredNorm()));
+    }
+  }
+  b.lo.head<2>() = centre.array() - radius;
+  b.hi.head<2>() = centre.array() + radius;
+  FitTopAndBottom(points, floor, rest, true, b);
   return b;
 }
 

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 
 #include "core/config.h"
 #include "core/error.h"
@@ -59,6 +60,38 @@ const JointSpec* JointOf(const TwinSpec& spec, const std::string& child) {
   for (const auto& j : spec.joints)
     if (j.child == child) return &j;
   return nullptr;
+}
+
+// The solids a part of recipe shape "box" or "cylinder" collides as (base frame): the fitted
+// box, less `hole` (x, y, depth) down from the middle of its top, as up to five boxes.
+std::vector<BoxSpec> FittedSolids(const UprightBounds& fit, bool cylinder,
+                                  const std::array<double, 3>& hole) {
+  const double yaw = core::ToRollPitchYaw(fit.yaw).z();
+  auto solid = [&](Eigen::Vector3d lo, Eigen::Vector3d hi) {
+    BoxSpec box;
+    const Eigen::Vector3d centre = fit.yaw * (0.5 * (lo + hi));
+    box.center = {centre.x(), centre.y(), centre.z()};
+    box.size = {hi.x() - lo.x(), hi.y() - lo.y(), hi.z() - lo.z()};
+    box.euler = {0, 0, yaw};
+    box.shape = cylinder ? SolidShape::kCylinder : SolidShape::kBox;
+    box.hidden = true;
+    return box;
+  };
+  const Eigen::Vector3d lo = fit.lo, hi = fit.hi, mid = 0.5 * (lo + hi);
+  if (hole[0] <= 0) return {solid(lo, hi)};
+  const Eigen::Vector3d h_lo(mid.x() - 0.5 * hole[0], mid.y() - 0.5 * hole[1],
+                             hole[2] > 0 ? hi.z() - hole[2] : lo.z());
+  const Eigen::Vector3d h_hi(mid.x() + 0.5 * hole[0], mid.y() + 0.5 * hole[1], hi.z());
+  std::vector<BoxSpec> walls;
+  auto add = [&](const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+    if ((b - a).minCoeff() > 1e-4) walls.push_back(solid(a, b));
+  };
+  add(lo, {h_lo.x(), hi.y(), hi.z()});                                // -x wall, full depth
+  add({h_hi.x(), lo.y(), lo.z()}, hi);                                // +x wall
+  add({h_lo.x(), lo.y(), lo.z()}, {h_hi.x(), h_lo.y(), hi.z()});      // -y between them
+  add({h_lo.x(), h_hi.y(), lo.z()}, {h_hi.x(), hi.y(), hi.z()});      // +y
+  add({h_lo.x(), h_lo.y(), lo.z()}, {h_hi.x(), h_hi.y(), h_lo.z()});  // floor, if not through
+  return walls;
 }
 
 }  // namespace
@@ -187,6 +220,7 @@ void ApplyRecipe(TwinSpec& spec, const sim::TwinRecipe& recipe,
     if (!JointOf(spec, p.name))
       candidates.push_back({p.name, UprightSize(PartMesh(p, twin_dir).vertices)});
   std::vector<bool> done(recipe.parts.size(), false);
+  std::map<std::string, UprightBounds> fitted;  // parts that collide as fitted solids
   for (std::size_t round = 0; round < recipe.parts.size(); ++round) {
     double best = 1e300;
     std::size_t best_r = 0;
@@ -226,6 +260,21 @@ void ApplyRecipe(TwinSpec& spec, const sim::TwinRecipe& recipe,
     part->fixed = want.fixed;
     if (want.mass > 0) part->mass = want.mass;
     if (want.friction > 0) part->friction = want.friction;
+    if (want.shape != "scan") {
+      const std::vector<Eigen::Vector3d> points = PartMesh(*part, twin_dir).vertices;
+      const Eigen::Vector3d at = Centroid(points);
+      const Eigen::Vector3d n(spec.support[0], spec.support[1], spec.support[2]);
+      const double floor = -(spec.support[3] + n.x() * at.x() + n.y() * at.y()) / n.z();
+      const bool cylinder = want.shape == "cylinder";
+      const UprightBounds fit =
+          cylinder ? FitUprightCylinder(points, floor) : FitUprightBox(points, floor);
+      fitted[want.name] = fit;
+      part->boxes = FittedSolids(fit, cylinder, want.hole);
+      part->collision = PartSpec::Collision::kSolids;
+      const Eigen::Vector3d size = fit.hi - fit.lo;
+      spdlog::info("twin: {} collides as a fitted {} ({:.4f} x {:.4f} x {:.4f} m)", want.name,
+                   want.shape, size.x(), size.y(), size.z());
+    }
   }
   // Joints: the one whose parent is the recipe's parent.
   for (std::size_t i = 0; i < recipe.joints.size(); ++i) {
@@ -290,6 +339,12 @@ void ApplyRecipe(TwinSpec& spec, const sim::TwinRecipe& recipe,
         if (p.dot(d) > extreme - 0.01) band.push_back(p);
       at = Centroid(band) - want.inset * d;
       yaw = std::atan2(d.y(), d.x());
+    } else if (const auto fit = fitted.find(part->name); fit != fitted.end()) {
+      // On the fitted solid, in its frame.
+      const UprightBounds& b = fit->second;
+      at = b.yaw * (0.5 * (b.lo + b.hi) +
+                    0.5 * (b.hi - b.lo).cwiseProduct(Eigen::Vector3d(want.box.data())));
+      yaw = core::ToRollPitchYaw(b.yaw).z();
     } else {
       Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;
       for (const auto& p : points) {
@@ -312,7 +367,8 @@ void ApplyRecipe(TwinSpec& spec, const sim::TwinRecipe& recipe,
     }
     if (want.grip_box[0] > 0 && want.grip_box[1] > 0 && want.grip_box[2] > 0) {
       BoxSpec box;
-      box.center = spec.sites.back().position;
+      const Eigen::Vector3d centre = at + turn * Eigen::Vector3d(want.grip_offset.data());
+      box.center = {centre.x(), centre.y(), centre.z()};
       box.size = want.grip_box;
       box.euler = {0, 0, spec.sites.back().yaw};
       FindPart(spec, want.part)->boxes.push_back(box);

@@ -14,6 +14,8 @@ core::Pose BoxSpec::pose() const {
 
 bool BoxSpec::Contains(const Eigen::Vector3d& p) const {
   const Eigen::Vector3d local = pose().Inverse() * p;
+  if (shape == SolidShape::kCylinder)
+    return std::abs(local.z()) <= 0.5 * size[2] && local.head<2>().norm() <= 0.5 * size[0];
   for (int i = 0; i < 3; ++i)
     if (std::abs(local[i]) > 0.5 * size[i]) return false;
   return true;
@@ -35,6 +37,27 @@ Mesh BoxMesh(const BoxSpec& box) {
   Mesh mesh;
   const core::Pose pose = box.pose();
   const Eigen::Vector3d half = 0.5 * Eigen::Vector3d(box.size.data());
+  if (box.shape == SolidShape::kCylinder) {
+    // A prism of `sides` faces: ring vertices 2k (bottom) and 2k+1 (top), then the two centres.
+    const int sides = 32;
+    for (int k = 0; k < sides; ++k) {
+      const double a = 2 * M_PI * k / sides;
+      for (double z : {-half.z(), half.z()})
+        mesh.vertices.push_back(pose *
+                                Eigen::Vector3d(half.x() * std::cos(a), half.x() * std::sin(a), z));
+    }
+    const int bottom = 2 * sides, top = bottom + 1;
+    mesh.vertices.push_back(pose * Eigen::Vector3d(0, 0, -half.z()));
+    mesh.vertices.push_back(pose * Eigen::Vector3d(0, 0, half.z()));
+    for (int k = 0; k < sides; ++k) {
+      const int b0 = 2 * k, t0 = b0 + 1, b1 = 2 * ((k + 1) % sides), t1 = b1 + 1;
+      mesh.triangles.emplace_back(b0, b1, t1);
+      mesh.triangles.emplace_back(b0, t1, t0);
+      mesh.triangles.emplace_back(bottom, b1, b0);
+      mesh.triangles.emplace_back(top, t0, t1);
+    }
+    return mesh;
+  }
   for (int i = 0; i < 8; ++i)
     mesh.vertices.push_back(pose * Eigen::Vector3d((i & 1 ? 1 : -1) * half.x(),
                                                    (i & 2 ? 1 : -1) * half.y(),

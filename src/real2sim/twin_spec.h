@@ -33,16 +33,26 @@
 
 namespace twinforge::real2sim {
 
+enum class SolidShape { kBox, kCylinder };
+
+// A box, or the upright cylinder inscribed in it (along the box's z; diameter size[0], which
+// must equal size[1]).
 struct BoxSpec {
   std::array<double, 3> center{0, 0, 0};
   std::array<double, 3> size{0.1, 0.1, 0.1};  // full edge lengths, m
   std::array<double, 3> euler{0, 0, 0};       // rad, roll/pitch/yaw
+  SolidShape shape = SolidShape::kBox;
+  bool hidden = false;  // (a part's solid) collided with, not drawn: fitted to what is seen
   template <class A>
   void Serialize(A& a) {
     a("center", center);
     a("size", size);
     a("euler", euler);
+    a.Enum("shape", shape, {{"box", SolidShape::kBox}, {"cylinder", SolidShape::kCylinder}});
+    a("hidden", hidden);
     a.Require(size[0] > 0 && size[1] > 0 && size[2] > 0, "size", "three positive lengths in m");
+    a.Require(shape == SolidShape::kBox || std::abs(size[0] - size[1]) < 1e-9, "size",
+              "a cylinder's diameter twice: [d, d, height]");
   }
   core::Pose pose() const;  // box frame -> base
   bool Contains(const Eigen::Vector3d& p) const;
@@ -71,12 +81,19 @@ struct PartSpec {
   // Solid boxes added to the part (base frame), seen and collided with: what a scan shows
   // poorly, e.g. a shiny handle bar the depth sensor lost.
   std::vector<BoxSpec> boxes;
+  // What the part collides with: "scan", boxes fitted to its scanned surface, plus `boxes`; or
+  // "solids", `boxes` alone: where the scan's few mm of blur matter (a peg and its hole), solids
+  // fitted to the scan (hidden: the scan is what is seen).
+  enum class Collision { kScan, kSolids } collision = Collision::kScan;
   template <class A>
   void Serialize(A& a) {
     a("name", name);
     a("mesh", mesh);
     a("cuts", cuts);
     a("boxes", boxes);
+    a.Enum("collision", collision, {{"scan", Collision::kScan}, {"solids", Collision::kSolids}});
+    a.Require(collision == Collision::kScan || !boxes.empty(), "collision",
+              "\"scan\", or \"solids\" with at least one of `boxes`");
     a("fixed", fixed);
     a("mass", mass);
     a("friction", friction);

@@ -240,13 +240,22 @@ struct CameraSpec {
 // How a twin rebuilt from a scan of the task's scene (`twin build --task`) gets the names this
 // file refers to: which scanned segment is which body, the joint a two-state scan finds, and
 // where each site goes. The task's author writes it once, as a person would in the twin editor;
-// it holds no geometry beyond rough sizes. See docs/twin.md.
+// it holds no geometry beyond rough sizes, and what a person would type from a part's drawing
+// (a hole's size). See docs/twin.md.
 struct TwinPartRecipe {
   std::string name;                     // the body name the task uses
   std::array<double, 3> size{0, 0, 0};  // rough extent (m): the two horizontal ones, then height
   bool fixed = false;                   // welded to the world (furniture), else a free body
   double mass = 0;                      // kg (0: the build's guess)
   double friction = 0;                  // (0: the build's default)
+  // What the part collides as: "scan" (boxes over its scanned surface), or a solid fitted to the
+  // scan, "box" or "cylinder" (upright), where the scan's few mm of blur matter: a peg in a
+  // hole, a mug's walls between the fingers.
+  std::string shape = "scan";
+  // A box hole down from the middle of a "box" part's top (x, y in its face frame, depth; a
+  // depth of 0 or past the bottom goes through), m. Zero: none. The scan cannot show a hole's
+  // clearance to a mm; this is the drawing's size.
+  std::array<double, 3> hole{0, 0, 0};
   template <class A>
   void Serialize(A& a) {
     a("name", name);
@@ -254,6 +263,12 @@ struct TwinPartRecipe {
     a("fixed", fixed);
     a("mass", mass);
     a("friction", friction);
+    a("shape", shape);
+    a("hole", hole);
+    a.Require(shape == "scan" || shape == "box" || shape == "cylinder", "shape",
+              "\"scan\", \"box\" or \"cylinder\"");
+    a.Require(hole[0] == 0 || (shape == "box" && hole[0] > 0 && hole[1] > 0 && hole[2] >= 0),
+              "hole", "[x, y, depth] in m, on a part of shape \"box\"");
     a.Require(!name.empty(), "name", "a body name");
     a.Require(size[0] > 0 && size[1] > 0 && size[2] > 0, "size",
               "three positive extents in m (horizontal, horizontal, height)");
@@ -298,9 +313,11 @@ struct TwinSiteRecipe {
   double inset = 0;
   std::array<double, 3> offset{0, 0, 0};
   double turn_deg = 0;
-  // A solid box (x, y, z sizes in the site's frame, m) added at the site: a handle the scan
-  // shows poorly, as a person would add one in the editor. Zero: none.
+  // A solid box (x, y, z sizes in the site's frame, m) added at the site, its centre moved by
+  // `grip_offset` (site frame): a handle the scan shows poorly, as a person would add one in the
+  // editor. Zero: none.
   std::array<double, 3> grip_box{0, 0, 0};
+  std::array<double, 3> grip_offset{0, 0, 0};
   // The scanned surface cut away around the site first (a subtract cut: sizes, and the centre's
   // offset from the site, in the site's frame, m): what is left of a half-lost handle would
   // only get in the fingers' way. Zero size: nothing cut.
@@ -316,6 +333,7 @@ struct TwinSiteRecipe {
     a("offset", offset);
     a("turn_deg", turn_deg);
     a("grip_box", grip_box);
+    a("grip_offset", grip_offset);
     a("clear_box", clear_box);
     a("clear_offset", clear_offset);
     a.Require(!name.empty() && !part.empty(), "name", "a site name and its part");
@@ -404,7 +422,8 @@ struct TaskSpec {
   }
 };
 
-// Loads a task file; a bare name ("open_drawer") means assets/tasks/<name>/task.yaml.
+// Loads a task file, or DIR/task.yaml for a directory (a twin's); else a built-in task by name
+// ("open_drawer": assets/tasks/<name>/task.yaml).
 // Throws ConfigError naming the file, line and field.
 TaskSpec LoadTaskSpec(const std::string& name_or_path);
 

@@ -1,0 +1,77 @@
+#include "real2sim/mesh.h"
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+namespace twinforge::real2sim {
+namespace {
+
+// Points on the sides and top of an upright box (size x, y, z on the floor at z = 0, turned by
+// `yaw` about its centre at `centre`), each off its face by Gaussian noise of `sigma` m.
+std::vector<Eigen::Vector3d> NoisyBoxSurface(const Eigen::Vector3d& size, double yaw,
+                                             const Eigen::Vector2d& centre, double sigma,
+                                             std::mt19937& rng) {
+  std::normal_distribution<double> noise(0, sigma);
+  std::uniform_real_distribution<double> unit(-0.5, 0.5);
+  std::vector<Eigen::Vector3d> points;
+  const core::Quat turn = core::Yaw(yaw);
+  for (int i = 0; i < 4000; ++i) {
+    Eigen::Vector3d p(unit(rng) * size.x(), unit(rng) * size.y(), (unit(rng) + 0.5) * size.z());
+    const int face = i % 5;  // -x, +x, -y, +y, top
+    if (face < 4)
+      p[face / 2] = (face % 2 ? 0.5 : -0.5) * size[face / 2] + noise(rng);
+    else
+      p.z() = size.z() + noise(rng);
+    points.push_back(turn * p + Eigen::Vector3d(centre.x(), centre.y(), 0));
+  }
+  return points;
+}
+
+// Noise of 1.5 mm widens a 2 cm peg's bounds by about a centimetre; the fit reads its faces.
+TEST(Mesh, FitUprightBoxReadsTheFacesNotTheNoise) {
+  std::mt19937 rng(3);
+  const Eigen::Vector3d size(0.02, 0.03, 0.09);
+  const auto points = NoisyBoxSurface(size, 0.3, {0.5, -0.1}, 0.0015, rng);
+  const UprightBounds bounds = UprightBox(points);
+  EXPECT_GT((bounds.hi - bounds.lo).x() - std::min(size.x(), size.y()), 0.006)
+      << "the bounds are widened (the test's premise)";
+  const UprightBounds fit = FitUprightBox(points, 0.0);
+  Eigen::Vector3d got = fit.hi - fit.lo;
+  if (got.x() > got.y()) std::swap(got.x(), got.y());  // the frame is turned by a multiple of 90
+  EXPECT_NEAR(got.x(), size.x(), 0.001);
+  EXPECT_NEAR(got.y(), size.y(), 0.001);
+  EXPECT_NEAR(got.z(), size.z(), 0.001);
+  EXPECT_NEAR(fit.lo.z(), 0.0, 1e-12) << "a bottom near the floor is put on it";
+  const Eigen::Vector3d centre = fit.yaw * (0.5 * (fit.lo + fit.hi));
+  EXPECT_NEAR(centre.x(), 0.5, 0.001);
+  EXPECT_NEAR(centre.y(), -0.1, 0.001);
+}
+
+// A mug: a cylinder of 4 cm radius with a handle sticking out 3 cm on one side.
+TEST(Mesh, FitUprightCylinderIgnoresTheHandle) {
+  std::mt19937 rng(5);
+  std::normal_distribution<double> noise(0, 0.001);
+  std::uniform_real_distribution<double> unit(0, 1);
+  const Eigen::Vector2d centre(0.45, 0.12);
+  const double radius = 0.04, height = 0.09;
+  std::vector<Eigen::Vector3d> points;
+  for (int i = 0; i < 3000; ++i) {
+    const double a = 2 * M_PI * unit(rng), r = radius + noise(rng);
+    points.emplace_back(centre.x() + r * std::cos(a), centre.y() + r * std::sin(a),
+                        height * unit(rng));
+  }
+  for (int i = 0; i < 400; ++i)  // the handle: a bar 2.5 to 3 cm out along +x (dense)
+    points.emplace_back(centre.x() + radius + 0.025 + 0.005 * unit(rng),
+                        centre.y() + 0.012 * (unit(rng) - 0.5), 0.02 + 0.05 * unit(rng));
+  const UprightBounds fit = FitUprightCylinder(points, 0.0);
+  const Eigen::Vector3d mid = 0.5 * (fit.lo + fit.hi), half = 0.5 * (fit.hi - fit.lo);
+  EXPECT_NEAR(mid.x(), centre.x(), 0.001);
+  EXPECT_NEAR(mid.y(), centre.y(), 0.001);
+  EXPECT_NEAR(half.x(), radius, 0.001);
+  EXPECT_NEAR(half.y(), radius, 0.001);
+  EXPECT_NEAR(fit.hi.z(), height, 0.003);
+}
+
+}  // namespace
+}  // namespace twinforge::real2sim
