@@ -169,6 +169,17 @@ std::pair<Eigen::Vector3d, double> Settle(const sim::ModelPtr& m, const sim::Dat
   return {Eigen::Vector3d(d->xpos + 3 * b), d->xmat[9 * b + 8]};
 }
 
+// A recipe part that collides as a solid fitted to its scan.
+sim::TwinPartRecipe FittedPart(const char* name, const std::array<double, 3>& size,
+                               const char* shape, double mass) {
+  sim::TwinPartRecipe part;
+  part.name = name;
+  part.size = size;
+  part.shape = shape;
+  part.mass = mass;
+  return part;
+}
+
 // A 2 cm peg and a block with a hole 1.5 mm wider a side, scanned with a mm of noise. Fitted
 // as boxes (recipe shape "box", the block with the drawing's hole through it), the peg set on
 // the hole goes down it.
@@ -192,16 +203,9 @@ TEST(Export, APegGoesDownTheHoleOfItsFittedBlock) {
     spec.parts.push_back(part);
   }
   sim::TwinRecipe recipe;
-  recipe.parts.resize(2);
-  recipe.parts[0].name = "peg";
-  recipe.parts[0].size = {0.02, 0.02, 0.09};
-  recipe.parts[0].shape = "box";
-  recipe.parts[0].mass = 0.06;
-  recipe.parts[1].name = "hole_block";
-  recipe.parts[1].size = {0.063, 0.063, 0.04};
-  recipe.parts[1].shape = "box";
+  recipe.parts = {FittedPart("peg", {0.02, 0.02, 0.09}, "box", 0.06),
+                  FittedPart("hole_block", {0.063, 0.063, 0.04}, "box", 1.2)};
   recipe.parts[1].hole = {hole, hole, 0};
-  recipe.parts[1].mass = 1.2;
   recipe.sites.resize(2);
   recipe.sites[0].name = "peg_tip";
   recipe.sites[0].part = "peg";
@@ -246,11 +250,7 @@ TEST(Export, AFittedCylinderStandsStill) {
   spec.parts[0].name = "object_0";
   spec.parts[0].mesh = "meshes/mug.ply";
   sim::TwinRecipe recipe;
-  recipe.parts.resize(1);
-  recipe.parts[0].name = "mug";
-  recipe.parts[0].size = {0.08, 0.08, 0.09};
-  recipe.parts[0].shape = "cylinder";
-  recipe.parts[0].mass = 0.3;
+  recipe.parts = {FittedPart("mug", {0.08, 0.08, 0.09}, "cylinder", 0.3)};
   ApplyRecipe(spec, recipe, dir, "test recipe");
   ASSERT_EQ(spec.parts[0].boxes.size(), 1u);
   EXPECT_NEAR(spec.parts[0].boxes[0].size[0], 0.08, 0.002);
