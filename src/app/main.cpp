@@ -6,6 +6,7 @@
 #include "app/doctor.h"
 #include "app/reality_commands.h"
 #include "app/sim_commands.h"
+#include "app/train_commands.h"
 #include "app/twin_commands.h"
 #include "core/error.h"
 #include "core/log.h"
@@ -15,10 +16,14 @@ int main(int argc, char** argv) {
   using namespace twinforge;
   // Before any tensor work: one BLAS thread per process (see learn/torch_runtime.h).
   learn::PinMathThreads(1);
+  learn::KeepLargeBuffers();
 
   CLI::App app{"twinforge: real scene -> digital twin -> robust policy -> real robot"};
   app.require_subcommand(1);
+  // Logs go to stderr from the start (spdlog's own default logger writes to stdout, which
+  // mixed log lines into the JSON reports the commands print there).
   std::string log_level = "info";
+  core::SetupLogging(log_level);
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error, critical, off")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "critical", "off"}))
       ->each([](const std::string& level) { core::SetupLogging(level); });
@@ -30,6 +35,7 @@ int main(int argc, char** argv) {
   app::AddRealityCommands(app, exit_code);
   app::AddDataCommands(app, exit_code);
   app::AddTwinCommands(app, exit_code);
+  app::AddTrainCommands(app, exit_code);
 
   try {
     app.parse(argc, argv);
