@@ -1,6 +1,7 @@
 #include "learn/torch_runtime.h"
 
 #include <dlfcn.h>
+#include <malloc.h>
 #include <torch/torch.h>
 #include <torch/version.h>
 
@@ -15,6 +16,12 @@ Fn Symbol(const char* name) {
   return reinterpret_cast<Fn>(::dlsym(RTLD_DEFAULT, name));
 }
 }  // namespace
+
+void KeepLargeBuffers() {
+  mallopt(M_MMAP_THRESHOLD, 256 << 20);
+  mallopt(M_TRIM_THRESHOLD, 1 << 30);
+  mallopt(M_TOP_PAD, 64 << 20);
+}
 
 void PinMathThreads(int threads) {
   const std::string text = std::to_string(threads);

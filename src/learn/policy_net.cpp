@@ -1,0 +1,108 @@
+#include "learn/policy_net.h"
+
+#include <cmath>
+
+#include "core/error.h"
+#include "core/fs.h"
+
+namespace twinforge::learn {
+
+namespace {
+
+// Appends Linear, LayerNorm and (with `relu`) ReLU.
+void AddDense(torch::nn::Sequential& s, int in, int out, bool relu) {
+  s->push_back(torch::nn::Linear(in, out));
+  s->push_back(torch::nn::LayerNorm(torch::nn::LayerNormOptions({out})));
+  if (relu) s->push_back(torch::nn::ReLU());
+}
+
+}  // namespace
+
+PointEncoderImpl::PointEncoderImpl(int features) {
+  torch::nn::Sequential per_point, project;
+  AddDense(per_point, features, 64, true);
+  AddDense(per_point, 64, 128, true);
+  AddDense(per_point, 128, 256, false);
+  AddDense(project, 256, kOut, false);
+  per_point_ = register_module("per_point", per_point);
+  project_ = register_module("project", project);
+}
+
+torch::Tensor PointEncoderImpl::forward(const torch::Tensor& points) {
+  return project_->forward(std::get<0>(per_point_->forward(points).max(1)));
+}
+
+PolicyNetImpl::PolicyNetImpl(const PolicyConfig& config) : config_(config) {
+  int in = config.proprio_dim;
+  if (config.point_features > 0) {
+    encoder_ = register_module("encoder", PointEncoder(config.point_features));
+    in += PointEncoderImpl::kOut;
+  }
+  torch::nn::Linear out(config.hidden, config.action_dim);
+  head_ = register_module(
+      "head", torch::nn::Sequential(torch::nn::Linear(in, config.hidden), torch::nn::Tanh(),
+                                    torch::nn::Linear(config.hidden, config.hidden),
+                                    torch::nn::Tanh(), out));
+  // A small last layer: the first actions are near uniform (discrete) or near zero.
+  torch::NoGradGuard no_grad;
+  out->weight.mul_(0.01);
+  out->bias.zero_();
+  if (!config.discrete)
+    log_std = register_parameter("log_std", torch::full({config.action_dim}, std::log(0.5)));
+}
+
+torch::Tensor PolicyNetImpl::forward(const torch::Tensor& points, const torch::Tensor& proprio) {
+  torch::Tensor x = proprio;
+  if (encoder_) x = torch::cat({encoder_->forward(points), proprio}, 1);
+  return head_->forward(x);
+}
+
+torch::Tensor PolicyNetImpl::LogProb(const torch::Tensor& output,
+                                     const torch::Tensor& actions) const {
+  if (config_.discrete)
+    return torch::log_softmax(output, 1).gather(1, actions.to(torch::kLong).view({-1, 1})).view(-1);
+  const torch::Tensor z = (actions - output) / log_std.exp();
+  return (-0.5 * z * z - log_std - 0.5 * std::log(2 * M_PI)).sum(1);
+}
+
+void SavePolicy(PolicyNet& net, const std::filesystem::path& path) {
+  torch::serialize::OutputArchive archive;
+  net->save(archive);
+  archive.write("twinforge_policy_config", c10::IValue(core::ToJson(net->config()).dump()));
+  const auto tmp = path.string() + ".tmp";
+  if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path());
+  archive.save_to(tmp);
+  std::filesystem::rename(tmp, path);
+}
+
+PolicyNet LoadPolicy(const std::filesystem::path& path) {
+  if (!std::filesystem::is_regular_file(path))
+    throw core::IoError("no policy file at " + path.string());
+  torch::serialize::InputArchive archive;
+  c10::IValue config_text;
+  try {
+    archive.load_from(path.string());
+    if (!archive.try_read("twinforge_policy_config", config_text))
+      throw core::Error(path.string() + ": a LibTorch archive, but not a twinforge policy");
+  } catch (const c10::Error& e) {
+    throw core::Error(path.string() + ": not a policy file (" + e.what_without_backtrace() + ")");
+  }
+  const auto config = core::ReadConfig<PolicyConfig>(
+      core::ParseConfigText(config_text.toStringRef(), path.string() + " (config)"));
+  PolicyNet net(config);
+  try {
+    net->load(archive);
+  } catch (const c10::Error& e) {
+    throw core::Error(path.string() + ": weights do not match the network its config describes (" +
+                      e.what_without_backtrace() + ")");
+  }
+  return net;
+}
+
+int64_t ParameterCount(torch::nn::Module& module) {
+  int64_t n = 0;
+  for (const auto& p : module.parameters()) n += p.numel();
+  return n;
+}
+
+}  // namespace twinforge::learn

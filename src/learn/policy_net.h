@@ -1,0 +1,76 @@
+// Policy networks on LibTorch: a DP3-style point-cloud encoder (a shared per-point MLP with layer
+// norm, max-pooled; ~60k parameters) or none (privileged state), concatenated with
+// proprioception, then an MLP with a discrete (14 moves) or Gaussian (continuous) head.
+//
+// Includes <torch/torch.h>: include it only from learn's .cpp files and tests.
+#pragma once
+
+#include <torch/torch.h>
+
+#include <filesystem>
+#include <string>
+
+#include "core/config.h"
+
+namespace twinforge::learn {
+
+struct PolicyConfig {
+  int point_features = 4;  // per point: x, y, z, and 1 for the arm's points (0: no points)
+  int points = 512;        // points per observation
+  int proprio_dim = 9;     // or the privileged state's size
+  int action_dim = 14;     // discrete: number of moves; continuous: action size
+  bool discrete = true;
+  int hidden = 256;  // head MLP width (two layers)
+  template <class A>
+  void Serialize(A& a) {
+    a("point_features", point_features);
+    a("points", points);
+    a("proprio_dim", proprio_dim);
+    a("action_dim", action_dim);
+    a("discrete", discrete);
+    a("hidden", hidden);
+    a.Require(point_features >= 0 && points > 0 && proprio_dim >= 0 && action_dim > 0, "points",
+              "non-negative input sizes and a positive action size");
+  }
+};
+
+// points [B, N, F] -> [B, 64]: per point Linear-LayerNorm-ReLU 64, 128, then Linear-LayerNorm
+// 256, max over the points, Linear-LayerNorm 64.
+class PointEncoderImpl : public torch::nn::Module {
+ public:
+  explicit PointEncoderImpl(int features);
+  torch::Tensor forward(const torch::Tensor& points);
+  static constexpr int kOut = 64;
+
+ private:
+  torch::nn::Sequential per_point_{nullptr}, project_{nullptr};
+};
+TORCH_MODULE(PointEncoder);
+
+class PolicyNetImpl : public torch::nn::Module {
+ public:
+  explicit PolicyNetImpl(const PolicyConfig& config);
+  // Discrete: logits [B, action_dim]. Continuous: the Gaussian's mean [B, action_dim] (its log
+  // standard deviation is `log_std`). `points` may be undefined when point_features is 0.
+  torch::Tensor forward(const torch::Tensor& points, const torch::Tensor& proprio);
+  // Log-likelihood of `actions` (discrete: [B] indices; continuous: [B, action_dim]), per row.
+  torch::Tensor LogProb(const torch::Tensor& output, const torch::Tensor& actions) const;
+  const PolicyConfig& config() const { return config_; }
+  torch::Tensor log_std;  // [action_dim], continuous only
+
+ private:
+  PolicyConfig config_;
+  PointEncoder encoder_{nullptr};
+  torch::nn::Sequential head_{nullptr};
+};
+TORCH_MODULE(PolicyNet);
+
+// One file with the weights and the config (a LibTorch archive; Python reads its tensors with
+// torch.jit.load(path).state_dict()). Written to a temporary name and renamed.
+void SavePolicy(PolicyNet& net, const std::filesystem::path& path);
+// Throws IoError when missing, Error naming the file when it is not a twinforge policy.
+PolicyNet LoadPolicy(const std::filesystem::path& path);
+
+int64_t ParameterCount(torch::nn::Module& module);
+
+}  // namespace twinforge::learn
