@@ -65,8 +65,8 @@ class PolicyNetImpl : public torch::nn::Module {
 };
 TORCH_MODULE(PolicyNet);
 
-// One file with the weights and the config (a LibTorch archive; Python reads its tensors with
-// torch.jit.load(path).state_dict()). Written to a temporary name and renamed.
+// One file with the weights and the config (a LibTorch archive), written to a temporary name
+// and renamed.
 void SavePolicy(PolicyNet& net, const std::filesystem::path& path);
 // Throws IoError when missing, Error naming the file when it is not a twinforge policy.
 PolicyNet LoadPolicy(const std::filesystem::path& path);
