@@ -6,6 +6,7 @@
 #include "core/config.h"
 #include "core/image.h"
 #include "core/thread_pool.h"
+#include "learn/evaluate.h"
 #include "sim/bench.h"
 #include "sim/camera.h"
 #include "sim/expert.h"
@@ -61,6 +62,50 @@ void AddSimCommands(CLI::App& parent, int& exit_code) {
                       {"mean_steps_to_success", report.mean_steps_to_success},
                       {"failed_episodes", report.failed_seeds}};
     std::cout << out.dump(2) << std::endl;
+    exit_code = 0;
+  });
+
+  // A learned policy's success rate, per level.
+  struct EvalCli {
+    std::string policy, task;
+    std::vector<int> levels{1};
+    learn::PolicyEvalOptions options;
+  };
+  auto eval_cli = std::make_shared<EvalCli>();
+  auto* eval = sim->add_subcommand(
+      "eval", "success rate of a policy (train bc ...) in the sim, per level (JSON)");
+  eval->add_option("--policy", eval_cli->policy, "policy file")
+      ->required()
+      ->check(CLI::ExistingFile);
+  eval->add_option("--task", eval_cli->task, "built-in task name, task.yaml or a twin directory")
+      ->required();
+  eval->add_option("--levels", eval_cli->levels, "randomization levels, e.g. 1,2,3")
+      ->delimiter(',')
+      ->check(CLI::Range(0, 3));
+  eval->add_option("--episodes", eval_cli->options.episodes, "episodes per level")
+      ->check(CLI::PositiveNumber);
+  eval->add_option("--seed", eval_cli->options.seed, "seed");
+  eval->add_option("--threads", eval_cli->options.threads, "worker threads")
+      ->check(CLI::PositiveNumber);
+  eval->callback([eval_cli, &exit_code] {
+    auto task = std::make_shared<const sim::Task>(sim::LoadTaskSpec(eval_cli->task));
+    core::Json levels = core::Json::array();
+    for (int level : eval_cli->levels) {
+      learn::PolicyEvalOptions o = eval_cli->options;
+      o.level = level;
+      const auto r = learn::EvaluatePolicy(eval_cli->policy, task, o);
+      levels.push_back({{"level", level},
+                        {"episodes", r.episodes},
+                        {"successes", r.successes},
+                        {"success_rate", r.success_rate()},
+                        {"steps", r.steps},
+                        {"seconds", r.seconds}});
+    }
+    std::cout << core::Json{{"policy", eval_cli->policy},
+                            {"task", task->spec().name},
+                            {"levels", levels}}
+                     .dump(2)
+              << std::endl;
     exit_code = 0;
   });
 
