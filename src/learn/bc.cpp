@@ -10,33 +10,35 @@
 #include "core/log.h"
 #include "learn/policy_net.h"
 #include "sim/action.h"
+#include "sim/camera.h"
 
 namespace twinforge::learn {
 
 void SamplePoints(const float* scene, int scene_n, const float* arm, int arm_n,
-                  const PointSampling& sampling, bool augment, std::mt19937& rng, float* out) {
+                  const PointSampling& sampling, bool augment, core::Rng& rng, float* out) {
   const int total = scene_n + arm_n;
   if (total <= 0) throw core::Error("an observation with no points");
-  std::vector<int> pool(total);
-  std::iota(pool.begin(), pool.end(), 0);
-  int keep = total;
-  if (augment) {
-    std::uniform_real_distribution<double> share(sampling.drop_min, sampling.drop_max);
-    keep = std::max(1, static_cast<int>(std::lround(total * (1 - share(rng)))));
-  }
-  // The first `keep` of a partial shuffle are the kept points; `n` are drawn from them, each
-  // once before any twice.
-  for (int i = 0; i < keep; ++i)
-    std::swap(pool[i], pool[std::uniform_int_distribution<int>(i, total - 1)(rng)]);
-  std::normal_distribution<float> jitter(0.f, static_cast<float>(sampling.jitter));
-  std::uniform_int_distribution<int> any(0, keep - 1);
-  for (int i = 0; i < sampling.n; ++i) {
-    const int k = pool[i < keep ? i : any(rng)];
+  // Every point as (x, y, z, is_arm).
+  std::vector<float> all(4 * std::size_t(total));
+  for (int k = 0; k < total; ++k) {
     const bool is_arm = k >= scene_n;
-    const float* p = is_arm ? arm + 3 * (k - scene_n) : scene + 3 * k;
-    for (int j = 0; j < 3; ++j) out[4 * i + j] = p[j] + (augment ? jitter(rng) : 0.f);
-    out[4 * i + 3] = is_arm ? 1.f : 0.f;
+    std::copy_n(is_arm ? arm + 3 * (k - scene_n) : scene + 3 * k, 3, all.data() + 4 * k);
+    all[4 * k + 3] = is_arm ? 1.f : 0.f;
   }
+  int keep = total;
+  if (augment)
+    keep = std::max(1, static_cast<int>(std::lround(
+                           total * (1 - rng.Uniform(sampling.drop_min, sampling.drop_max)))));
+  if (keep < total) {
+    std::vector<float> kept(4 * std::size_t(keep));
+    sim::ResamplePoints(all.data(), total, keep, rng, kept.data(), 4);
+    all.swap(kept);
+  }
+  sim::ResamplePoints(all.data(), keep, sampling.n, rng, out, 4);
+  if (augment)
+    for (int i = 0; i < sampling.n; ++i)
+      for (int j = 0; j < 3; ++j)
+        out[4 * i + j] += static_cast<float>(rng.Normal() * sampling.jitter);
 }
 
 namespace {
@@ -104,7 +106,7 @@ struct Batch {
 };
 
 Batch MakeBatch(const std::vector<Sample>& samples, const std::vector<std::size_t>& rows,
-                const PointSampling& sampling, bool augment, bool discrete, std::mt19937& rng) {
+                const PointSampling& sampling, bool augment, bool discrete, core::Rng& rng) {
   const auto B = static_cast<int64_t>(rows.size());
   const auto& first = *samples[rows[0]].episode;
   const int64_t P = static_cast<int64_t>(first.obs.at("proprio").row_size());
@@ -132,7 +134,7 @@ Scores Evaluate(PolicyNet& net, const std::vector<Sample>& samples, const PointS
                 bool discrete) {
   torch::NoGradGuard no_grad;
   net->eval();
-  std::mt19937 rng(12345);
+  core::Rng rng(12345);
   Scores s;
   for (std::size_t start = 0; start < samples.size(); start += 256) {
     std::vector<std::size_t> rows;
@@ -158,7 +160,7 @@ BcReport TrainBc(const std::filesystem::path& demos, const std::filesystem::path
   const auto start = std::chrono::steady_clock::now();
   const Data data = LoadDemos(demos);
   torch::manual_seed(options.seed);
-  std::mt19937 rng(static_cast<uint32_t>(options.seed));
+  core::Rng rng(options.seed);
   PolicyConfig config;
   config.points = options.sampling.n;
   config.proprio_dim = data.proprio_dim;
@@ -188,7 +190,7 @@ BcReport TrainBc(const std::filesystem::path& demos, const std::filesystem::path
   double best = std::numeric_limits<double>::infinity();
   Scores best_scores;
   for (int epoch = 1; epoch <= options.max_epochs; ++epoch) {
-    std::shuffle(order.begin(), order.end(), rng);
+    rng.Shuffle(order);
     double total = 0;
     for (std::size_t at = 0; at < order.size(); at += options.batch) {
       const std::vector<std::size_t> rows(

@@ -4,23 +4,24 @@
 
 #include <cstdint>
 #include <filesystem>
-#include <random>
 #include <string>
 
 #include "core/progress.h"
+#include "core/rng.h"
 
 namespace twinforge::learn {
 
 // How one observation's points become the policy's input: `n` rows of (x, y, z, is_arm) drawn
 // from the scene's and the arm's points. Training augments as RialTo does: a random share in
-// [drop_min, drop_max] of the points dropped, then each jittered by Gaussian noise.
+// [drop_min, drop_max] of the points dropped, then each jittered by Gaussian noise. The points
+// are drawn as sim::ResamplePoints draws them: each once before any twice.
 struct PointSampling {
   int n = 512;
   double drop_min = 0.1, drop_max = 0.3;
   double jitter = 0.002;  // m
 };
 void SamplePoints(const float* scene, int scene_n, const float* arm, int arm_n,
-                  const PointSampling& sampling, bool augment, std::mt19937& rng, float* out);
+                  const PointSampling& sampling, bool augment, core::Rng& rng, float* out);
 
 struct BcOptions {
   PointSampling sampling;

@@ -21,9 +21,9 @@ std::filesystem::path WriteTargetDemos(const std::string& name, bool discrete, i
   const auto dir = core::testing::TestDir("bc_test", name);
   std::filesystem::create_directories(dir);
   const auto path = dir / "demos.hdf5";
-  std::mt19937 rng(7);
-  std::uniform_real_distribution<float> u(-0.3f, 0.3f);
-  std::normal_distribution<float> blob(0.f, 0.01f);
+  core::Rng rng(7);
+  auto u = [](core::Rng& r) { return static_cast<float>(r.Uniform(-0.3, 0.3)); };
+  auto blob = [](core::Rng& r) { return static_cast<float>(r.Normal(0, 0.01)); };
   auto writer = core::DatasetWriter::Create(
       path, {{"action_mode", discrete ? "discrete" : "continuous"}, {"task", "synthetic"}});
   for (int d = 0; d < demos; ++d) {
@@ -72,8 +72,8 @@ std::filesystem::path WriteTargetDemos(const std::string& name, bool discrete, i
 BcOptions FastOptions() {
   BcOptions o;
   o.sampling.n = 64;
-  o.max_epochs = 40;
-  o.patience = 40;
+  o.max_epochs = 60;
+  o.patience = 60;
   o.batch = 32;
   return o;
 }
@@ -136,7 +136,7 @@ TEST(SamplePoints, DropsJittersAndFlagsTheArm) {
   std::vector<float> scene(3 * 300, 0.f), arm(3 * 100, 1.f);
   PointSampling s;
   s.n = 512;
-  std::mt19937 rng(1);
+  core::Rng rng(1);
   std::vector<float> out(4 * s.n);
   SamplePoints(scene.data(), 300, arm.data(), 100, s, false, rng, out.data());
   int arm_rows = 0;

@@ -1,7 +1,6 @@
 #include "learn/evaluate.h"
 
 #include <chrono>
-#include <random>
 
 #include "core/error.h"
 #include "core/rng.h"
@@ -52,7 +51,7 @@ PolicyEvalReport EvaluatePolicy(const std::filesystem::path& policy,
       const uint64_t seed = core::MixSeed(options.seed, static_cast<uint64_t>(i));
       env.Reset(seed, options.level);
       core::Rng cloud_rng(seed, 0xc1);
-      std::mt19937 sample_rng(static_cast<uint32_t>(seed));
+      core::Rng sample_rng(seed, 0x5a);
       for (int t = 0; t < task->spec().horizon; ++t) {
         clouds.Make(env.model(), env.data(), env.base(), cloud_rng, scene.data(), arm.data());
         SamplePoints(scene.data(), options.scene_points, arm.data(), options.arm_points, sampling,

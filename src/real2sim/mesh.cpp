@@ -3,7 +3,6 @@
 #include <open3d/Open3D.h>
 
 #include <numeric>
-#include <random>
 #include <tuple>
 
 #include "core/error.h"
@@ -282,11 +281,11 @@ UprightBounds FitUprightCylinder(const std::vector<Eigen::Vector3d>& points, dou
     return near;
   };
   if (ring.size() >= 3) {
-    std::mt19937 rng(1);
-    std::uniform_int_distribution<std::size_t> pick(0, ring.size() - 1);
+    core::Rng rng(1);
+    auto pick = [&] { return ring[rng.Index(ring.size())]; };
     std::size_t best = 0;
     for (int trial = 0; trial < 300; ++trial) {
-      const Eigen::Vector2d p = ring[pick(rng)], q = ring[pick(rng)], r = ring[pick(rng)];
+      const Eigen::Vector2d p = pick(), q = pick(), r = pick();
       // The centre is where the perpendicular bisectors of pq and pr meet.
       Eigen::Matrix2d A;
       A << (q - p).transpose(), (r - p).transpose();

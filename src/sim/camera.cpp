@@ -255,9 +255,9 @@ int SurfaceSampler::Transform(const mjModel* m, const mjData* d, const core::Pos
   return count;
 }
 
-void ResamplePoints(const float* points, int n, int count, core::Rng& rng, float* out) {
+void ResamplePoints(const float* points, int n, int count, core::Rng& rng, float* out, int stride) {
   if (n <= 0) {
-    std::fill(out, out + 3 * count, 0.0f);
+    std::fill(out, out + stride * count, 0.0f);
     return;
   }
   if (n >= count) {
@@ -266,16 +266,16 @@ void ResamplePoints(const float* points, int n, int count, core::Rng& rng, float
     int chosen = 0;
     for (int i = 0; i < n && chosen < count; ++i) {
       if (rng.Uniform() * (n - i) < count - chosen) {
-        std::copy(points + 3 * i, points + 3 * i + 3, out + 3 * chosen);
+        std::copy(points + stride * i, points + stride * (i + 1), out + stride * chosen);
         ++chosen;
       }
     }
     return;
   }
-  std::copy(points, points + 3 * n, out);
+  std::copy(points, points + stride * n, out);
   for (int i = n; i < count; ++i) {
     const int j = static_cast<int>(rng.Index(n));
-    std::copy(points + 3 * j, points + 3 * j + 3, out + 3 * i);
+    std::copy(points + stride * j, points + stride * (j + 1), out + stride * i);
   }
 }
 

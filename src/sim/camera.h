@@ -103,9 +103,11 @@ class SurfaceSampler {
   std::vector<uint8_t> scaled_;  // whether local_ is relative to geom_size
 };
 
-// Draws exactly `count` points from `points` (n of them) into out, without replacement when
-// n >= count, otherwise all of them plus repeats; zero-fills when n == 0.
-void ResamplePoints(const float* points, int n, int count, core::Rng& rng, float* out);
+// Draws exactly `count` points from `points` (n of them, `stride` floats each) into out, without
+// replacement when n >= count (keeping their order), otherwise all of them plus repeats;
+// zero-fills when n == 0.
+void ResamplePoints(const float* points, int n, int count, core::Rng& rng, float* out,
+                    int stride = 3);
 
 // Everything needed to turn an env's state into the clouds a policy sees, with buffers
 // allocated once. Not thread-safe: one per worker.
