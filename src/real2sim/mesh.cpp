@@ -171,8 +171,12 @@ void AppendMesh(Mesh& into, const Mesh& from) {
 }
 
 UprightBounds UprightBox(const std::vector<Eigen::Vector3d>& points) {
+  return BoundsIn(points, core::Yaw(UprightYaw(points)));
+}
+
+UprightBounds BoundsIn(const std::vector<Eigen::Vector3d>& points, const core::Quat& yaw) {
   UprightBounds b;
-  b.yaw = core::Yaw(UprightYaw(points));
+  b.yaw = yaw;
   b.lo = Eigen::Vector3d::Constant(1e300);
   b.hi = -b.lo;
   for (const auto& p : points) {
@@ -256,15 +260,8 @@ UprightBounds FitUprightBox(const std::vector<Eigen::Vector3d>& points, double f
 
 UprightBounds FitUprightCylinder(const std::vector<Eigen::Vector3d>& points, double floor,
                                  double rest, double outlier) {
-  UprightBounds b = UprightBox(points);
-  b.yaw = core::Quat::Identity();
+  UprightBounds b = BoundsIn(points, core::Quat::Identity());
   if (points.empty()) return b;
-  b.lo = Eigen::Vector3d::Constant(1e300);
-  b.hi = -b.lo;
-  for (const auto& p : points) {
-    b.lo = b.lo.cwiseMin(p);
-    b.hi = b.hi.cwiseMax(p);
-  }
   const double mid = 0.5 * (b.lo.z() + b.hi.z()), quarter = 0.25 * (b.hi.z() - b.lo.z());
   std::vector<Eigen::Vector2d> ring;
   for (const auto& p : points)

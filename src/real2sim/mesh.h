@@ -84,6 +84,8 @@ struct UprightBounds {
   Eigen::Vector3d lo = Eigen::Vector3d::Zero(), hi = Eigen::Vector3d::Zero();
 };
 UprightBounds UprightBox(const std::vector<Eigen::Vector3d>& points);
+// The points' bounds in the frame turned by `yaw` (the identity: axis-aligned bounds).
+UprightBounds BoundsIn(const std::vector<Eigen::Vector3d>& points, const core::Quat& yaw);
 
 // The upright box through the median of the surface points near each of its faces: unlike the
 // bounds, not widened by depth noise and the fusion's blur (a 2 cm peg's bounds are 2.7 cm).

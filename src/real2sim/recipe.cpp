@@ -339,40 +339,35 @@ void ApplyRecipe(TwinSpec& spec, const sim::TwinRecipe& recipe,
         if (p.dot(d) > extreme - 0.01) band.push_back(p);
       at = Centroid(band) - want.inset * d;
       yaw = std::atan2(d.y(), d.x());
-    } else if (const auto fit = fitted.find(part->name); fit != fitted.end()) {
-      // On the fitted solid, in its frame.
-      const UprightBounds& b = fit->second;
+    } else {
+      // A point of the part's bounds: axis-aligned, or a fitted solid's in the solid's frame.
+      const auto fit = fitted.find(part->name);
+      const bool solid = fit != fitted.end();
+      const UprightBounds b = solid ? fit->second : BoundsIn(points, core::Quat::Identity());
       at = b.yaw * (0.5 * (b.lo + b.hi) +
                     0.5 * (b.hi - b.lo).cwiseProduct(Eigen::Vector3d(want.box.data())));
-      yaw = core::ToRollPitchYaw(b.yaw).z();
-    } else {
-      Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;
-      for (const auto& p : points) {
-        lo = lo.cwiseMin(p);
-        hi = hi.cwiseMax(p);
-      }
-      at = 0.5 * (lo + hi) + 0.5 * (hi - lo).cwiseProduct(Eigen::Vector3d(want.box.data()));
+      if (solid) yaw = core::ToRollPitchYaw(b.yaw).z();
     }
     at += Eigen::Vector3d(want.offset.data());
     spec.sites.push_back(
         {want.name, part->name, {at.x(), at.y(), at.z()}, yaw + want.turn_deg * M_PI / 180});
-    const core::Quat turn = core::Yaw(spec.sites.back().yaw);
+    // A box at the site: `size` and the centre's `offset` in the site's frame.
+    auto site_box = [&](const std::array<double, 3>& size, const std::array<double, 3>& offset) {
+      const double site_yaw = spec.sites.back().yaw;
+      const Eigen::Vector3d centre = at + core::Yaw(site_yaw) * Eigen::Vector3d(offset.data());
+      BoxSpec box;
+      box.center = {centre.x(), centre.y(), centre.z()};
+      box.size = size;
+      box.euler = {0, 0, site_yaw};
+      return box;
+    };
     if (want.clear_box[0] > 0 && want.clear_box[1] > 0 && want.clear_box[2] > 0) {
-      const Eigen::Vector3d centre = at + turn * Eigen::Vector3d(want.clear_offset.data());
       CutSpec cut;
-      cut.box.center = {centre.x(), centre.y(), centre.z()};
-      cut.box.size = want.clear_box;
-      cut.box.euler = {0, 0, spec.sites.back().yaw};
+      cut.box = site_box(want.clear_box, want.clear_offset);
       FindPart(spec, want.part)->cuts.push_back(cut);
     }
-    if (want.grip_box[0] > 0 && want.grip_box[1] > 0 && want.grip_box[2] > 0) {
-      BoxSpec box;
-      const Eigen::Vector3d centre = at + turn * Eigen::Vector3d(want.grip_offset.data());
-      box.center = {centre.x(), centre.y(), centre.z()};
-      box.size = want.grip_box;
-      box.euler = {0, 0, spec.sites.back().yaw};
-      FindPart(spec, want.part)->boxes.push_back(box);
-    }
+    if (want.grip_box[0] > 0 && want.grip_box[1] > 0 && want.grip_box[2] > 0)
+      FindPart(spec, want.part)->boxes.push_back(site_box(want.grip_box, want.grip_offset));
   }
 }
 
