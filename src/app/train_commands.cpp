@@ -4,7 +4,13 @@
 #include <memory>
 #include <nlohmann/json.hpp>
 
+#include "core/error.h"
+#include "core/log.h"
 #include "learn/bc.h"
+#include "learn/evaluate.h"
+#include "learn/ppo.h"
+#include "learn/rollout.h"
+#include "sim/task.h"
 
 namespace twinforge::app {
 
@@ -14,6 +20,155 @@ struct BcCli {
   std::string demos, out;
   learn::BcOptions options;
 };
+
+// The twin's task file when --twin is given (its task must be --task), else the task itself.
+std::shared_ptr<const sim::Task> LoadTrainTask(const std::string& task, const std::string& twin) {
+  if (twin.empty()) return std::make_shared<const sim::Task>(sim::LoadTaskSpec(task));
+  const std::filesystem::path file = std::filesystem::path(twin) / "task.yaml";
+  if (!std::filesystem::exists(file))
+    throw core::IoError(twin + ": no task.yaml (make the twin with `twin build --task " + task +
+                        "`)");
+  sim::TaskSpec spec = sim::LoadTaskSpec(file.string());
+  if (!task.empty() && spec.name != task)
+    throw core::ConfigError(file.string(), "name",
+                            "the twin is of task '" + spec.name + "', not '" + task + "'");
+  return std::make_shared<const sim::Task>(std::move(spec));
+}
+
+struct InverseDistillCli {
+  std::string policy, task, twin, out;
+  learn::InverseDistillOptions options;
+};
+
+struct RlCli {
+  std::string task, twin, demos, out;
+  bool fresh = false;
+  learn::PpoOptions options;
+};
+
+struct ExportCli {
+  std::string policy, out;
+};
+
+void AddInverseDistill(CLI::App& train, int& exit_code) {
+  auto cli = std::make_shared<InverseDistillCli>();
+  cli->options.rollout.sample = true;
+  cli->options.rollout.episodes = 300;
+  cli->options.rollout.threads = 2;
+  auto* c = train.add_subcommand(
+      "inverse-distill",
+      "roll a real-demo policy out in the twin; keep its successes as sim demos (JSON report)");
+  c->add_option("--policy", cli->policy, "policy from `train bc`")->required();
+  c->add_option("--task", cli->task, "task name (the twin's) or task.yaml")->required();
+  c->add_option("--twin", cli->twin, "twin directory (`twin build --out`); default: the task's "
+                                     "own scene");
+  c->add_option("--n", cli->options.successes, "successful episodes to keep")
+      ->check(CLI::PositiveNumber);
+  c->add_option("--max-episodes", cli->options.rollout.episodes, "budget of attempts")
+      ->check(CLI::PositiveNumber);
+  c->add_option("--level", cli->options.rollout.level, "randomization level 0..3")
+      ->check(CLI::Range(0, 3));
+  c->add_option("--temperature", cli->options.rollout.temperature,
+                "sampling temperature of the policy's moves (noise)")
+      ->check(CLI::Range(0.05, 10.0));
+  c->add_flag("!--greedy", cli->options.rollout.sample, "take the most likely move, no noise");
+  c->add_option("--seed", cli->options.rollout.seed, "seed");
+  c->add_option("--threads", cli->options.rollout.threads, "worker threads")
+      ->check(CLI::PositiveNumber);
+  c->add_option("--out", cli->out, "sim demos HDF5 to write (must not exist)")->required();
+  c->callback([cli, &exit_code] {
+    auto task = LoadTrainTask(cli->task, cli->twin);
+    core::Progress progress("inverse distillation", cli->options.successes, "demos");
+    const learn::InverseDistillReport r =
+        learn::InverseDistill(cli->policy, task, cli->options, cli->out, &progress);
+    progress.Finish();
+    const nlohmann::json report = {{"policy", cli->policy},
+                                   {"task", task->spec().name},
+                                   {"scene", task->spec().scene},
+                                   {"out", cli->out},
+                                   {"attempts", r.attempts},
+                                   {"successes", r.successes},
+                                   {"success_rate", r.success_rate()},
+                                   {"seconds", r.seconds}};
+    std::cout << report.dump(2) << "\n";
+    exit_code = r.successes >= cli->options.successes ? 0 : 3;
+    if (exit_code)
+      spdlog::error("inverse distillation: only {} of {} demos within {} attempts",
+                    r.successes, cli->options.successes, r.attempts);
+  });
+}
+
+void AddRl(CLI::App& train, int& exit_code) {
+  auto cli = std::make_shared<RlCli>();
+  auto* c = train.add_subcommand(
+      "rl", "PPO + BC on privileged state in the twin; resumes its checkpoint (JSON report)");
+  c->add_option("--task", cli->task, "task name (the twin's) or task.yaml")->required();
+  c->add_option("--twin", cli->twin, "twin directory; default: the task's own scene");
+  c->add_option("--demos", cli->demos, "sim demos from `train inverse-distill`, or none")
+      ->required();
+  c->add_option("--out", cli->out, "teacher policy; curve (.curve.csv/.svg) and checkpoint "
+                                   "(.ckpt) beside it")
+      ->required();
+  auto& o = cli->options;
+  c->add_option("--envs", o.num_envs, "parallel environments")->check(CLI::PositiveNumber);
+  c->add_option("--threads", o.threads, "worker threads")->check(CLI::PositiveNumber);
+  c->add_option("--level", o.level, "randomization level 0..3")->check(CLI::Range(0, 3));
+  c->add_option("--seed", o.seed, "seed");
+  c->add_option("--bc-coef", o.bc_coef, "weight of the BC loss")->check(CLI::Range(0.0, 100.0));
+  c->add_option("--lr", o.learning_rate, "Adam learning rate")->check(CLI::Range(1e-6, 1.0));
+  c->add_option("--target", o.target_success, "stop at this greedy success rate")
+      ->check(CLI::Range(0.0, 1.0));
+  c->add_option("--eval-every", o.eval_every, "iterations between evaluations")
+      ->check(CLI::PositiveNumber);
+  c->add_option("--eval-episodes", o.eval_episodes, "episodes per evaluation")
+      ->check(CLI::PositiveNumber);
+  c->add_option("--minutes", o.max_seconds, "wall-clock budget in minutes (0: none)")
+      ->transform([](std::string v) { return std::to_string(std::stod(v) * 60); });
+  c->add_option("--max-steps", o.max_env_steps, "env-step budget (0: none)");
+  c->add_option("--iterations", o.max_iterations, "iteration budget (0: none)");
+  c->add_flag("--fresh", cli->fresh, "discard an existing checkpoint");
+  c->callback([cli, &exit_code] {
+    auto task = LoadTrainTask(cli->task, cli->twin);
+    const std::string demos = cli->demos == "none" ? "" : cli->demos;
+    if (!demos.empty() && !std::filesystem::exists(demos))
+      throw core::IoError("--demos: no file " + demos + " (use --demos none for PPO from scratch)");
+    core::Progress progress("rl", cli->options.max_iterations, "iterations");
+    const learn::PpoReport r =
+        learn::TrainPpo(task, demos, cli->out, cli->options, cli->fresh, &progress);
+    progress.Finish();
+    const nlohmann::json report = {{"policy", cli->out},
+                                   {"task", task->spec().name},
+                                   {"demos", demos.empty() ? "none" : demos},
+                                   {"iterations", r.iterations},
+                                   {"resumed_from", r.resumed_from},
+                                   {"env_steps", r.env_steps},
+                                   {"seconds", r.seconds},
+                                   {"stopped_by", r.stopped_by},
+                                   {"best_eval_success", r.best_eval_success},
+                                   {"best_iteration", r.best_iteration},
+                                   {"update_samples_per_s", r.update_samples_per_s},
+                                   {"curve_csv", r.curve_csv.string()},
+                                   {"curve_svg", r.curve_svg.string()},
+                                   {"checkpoint", r.checkpoint.string()}};
+    std::cout << report.dump(2) << "\n";
+    exit_code = 0;
+  });
+}
+
+void AddExport(CLI::App& train, int& exit_code) {
+  auto cli = std::make_shared<ExportCli>();
+  auto* c = train.add_subcommand(
+      "export", "write a policy as TorchScript for Python: torch.jit.load(path)(points, proprio)");
+  c->add_option("--policy", cli->policy, "policy file")->required();
+  c->add_option("--out", cli->out, "TorchScript file to write")->required();
+  c->callback([cli, &exit_code] {
+    learn::PolicyNet net = learn::LoadPolicy(cli->policy);
+    learn::ExportTorchScript(net, cli->out);
+    std::cout << nlohmann::json({{"policy", cli->policy}, {"torchscript", cli->out}}).dump(2)
+              << "\n";
+    exit_code = 0;
+  });
+}
 
 }  // namespace
 
@@ -57,6 +212,9 @@ void AddTrainCommands(CLI::App& parent, int& exit_code) {
     std::cout << report.dump(2) << "\n";
     exit_code = 0;
   });
+  AddInverseDistill(*train, exit_code);
+  AddRl(*train, exit_code);
+  AddExport(*train, exit_code);
 }
 
 }  // namespace twinforge::app

@@ -3,80 +3,232 @@
 #include <chrono>
 
 #include "core/error.h"
+#include "core/log.h"
 #include "core/rng.h"
 #include "core/thread_pool.h"
 #include "learn/bc.h"
-#include "learn/policy_net.h"
+#include "learn/rollout.h"
 #include "sim/camera.h"
 #include "sim/env.h"
 
 namespace twinforge::learn {
 
-PolicyEvalReport EvaluatePolicy(const std::filesystem::path& policy,
-                                std::shared_ptr<const sim::Task> task,
-                                const PolicyEvalOptions& options) {
-  const auto start = std::chrono::steady_clock::now();
-  PolicyNet net = LoadPolicy(policy);
-  net->eval();
+namespace {
+
+double SecondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+bool Discrete(const sim::Task& task) {
+  return task.spec().control.action == sim::ActionMode::kDiscrete;
+}
+
+// The action a policy output [1, action_dim] asks for.
+sim::Action ChooseAction(const PolicyNet& net, const torch::Tensor& out,
+                         const PolicyEvalOptions& options, core::Rng& rng) {
   const PolicyConfig& config = net->config();
-  const bool discrete = task->spec().control.action == sim::ActionMode::kDiscrete;
+  if (config.discrete) {
+    int index = static_cast<int>(out.argmax(1).item<int64_t>());
+    if (options.sample) {
+      const torch::Tensor p = torch::softmax(out[0] / options.temperature, 0);
+      const float* prob = p.data_ptr<float>();
+      double u = rng.Uniform();
+      index = config.action_dim - 1;
+      for (int k = 0; k < config.action_dim; ++k)
+        if ((u -= prob[k]) < 0) {
+          index = k;
+          break;
+        }
+    }
+    return sim::Action::Discrete(index);
+  }
+  std::array<double, sim::kContinuousActionDim> v{};
+  const float* mean = out.data_ptr<float>();
+  const float* log_std = net->log_std.data_ptr<float>();
+  for (int k = 0; k < sim::kContinuousActionDim; ++k)
+    v[k] = mean[k] +
+           (options.sample ? std::exp(log_std[k]) * options.temperature * rng.Normal() : 0.0);
+  return sim::Action::Continuous(v);
+}
+
+}  // namespace
+
+void CheckPolicyFitsTask(const PolicyConfig& config, const sim::Task& task,
+                         const std::string& what) {
+  const bool discrete = Discrete(task);
   const int action_dim = discrete ? sim::kDiscreteActions : sim::kContinuousActionDim;
+  const bool points = config.point_features > 0;
+  const int input_dim = points ? sim::kProprioDim : sim::StateDim(task);
   if (config.discrete != discrete || config.action_dim != action_dim ||
-      config.proprio_dim != sim::kProprioDim || config.point_features != 4)
-    throw core::Error(policy.string() + ": a policy for " + std::to_string(config.action_dim) +
+      config.proprio_dim != input_dim || (points && config.point_features != 4))
+    throw core::Error(what + ": a policy for " + std::to_string(config.action_dim) +
                       (config.discrete ? " discrete" : "") + " actions from " +
-                      std::to_string(config.proprio_dim) + "-d proprioception and points; task '" +
-                      task->spec().name + "' needs " + std::to_string(action_dim) +
+                      std::to_string(config.proprio_dim) + "-d " +
+                      (points ? "proprioception and points" : "state") + "; task '" +
+                      task.spec().name + "' needs " + std::to_string(action_dim) +
                       (discrete ? " discrete" : "") + " actions from " +
-                      std::to_string(sim::kProprioDim) + "-d proprioception");
-  PolicyEvalReport report;
-  report.episodes = options.episodes;
-  report.steps.assign(options.episodes, -1);
+                      std::to_string(input_dim) + "-d " +
+                      (points ? "proprioception and points" : "privileged state"));
+}
+
+std::vector<PolicyEpisode> RunPolicyEpisodes(PolicyNet& net, std::shared_ptr<const sim::Task> task,
+                                             const PolicyEvalOptions& options, int64_t first,
+                                             int64_t count, bool record) {
+  const PolicyConfig& config = net->config();
+  const bool points = config.point_features > 0;
+  const bool discrete = config.discrete;
+  std::vector<PolicyEpisode> episodes(count);
   core::ThreadPool pool(options.threads);
-  const int blocks = pool.size();
+  const int blocks = static_cast<int>(std::min<int64_t>(pool.size(), std::max<int64_t>(count, 1)));
   pool.ParallelFor(blocks, [&](int64_t block) {
     torch::NoGradGuard no_grad;
     sim::Env env(task, static_cast<int>(block));
-    sim::CloudMaker::Options cloud_options;
-    cloud_options.scene_points = options.scene_points;
-    cloud_options.arm_points = options.arm_points;
-    sim::CloudMaker clouds(*task, env.model(), cloud_options);
+    const int state_dim = env.state_dim();
+    const int input_dim = points ? sim::kProprioDim : state_dim;
+    std::unique_ptr<sim::CloudMaker> clouds;
+    if (points) {
+      sim::CloudMaker::Options cloud_options;
+      cloud_options.scene_points = options.scene_points;
+      cloud_options.arm_points = options.arm_points;
+      clouds = std::make_unique<sim::CloudMaker>(*task, env.model(), cloud_options);
+    }
     std::vector<float> scene(3 * options.scene_points), arm(3 * options.arm_points);
+    std::vector<float> state(state_dim), proprio(sim::kProprioDim);
     PointSampling sampling;
     sampling.n = config.points;
-    torch::Tensor points = torch::empty({1, config.points, 4});
-    torch::Tensor proprio = torch::empty({1, sim::kProprioDim});
-    for (int64_t i = options.episodes * block / blocks; i < options.episodes * (block + 1) / blocks;
-         ++i) {
-      const uint64_t seed = core::MixSeed(options.seed, static_cast<uint64_t>(i));
+    torch::Tensor point_input = torch::empty({1, config.points, 4});
+    torch::Tensor input = torch::empty({1, input_dim});
+    const int horizon = task->spec().horizon;
+    for (int64_t j = count * block / blocks; j < count * (block + 1) / blocks; ++j) {
+      const uint64_t seed = core::MixSeed(options.seed, static_cast<uint64_t>(first + j));
       env.Reset(seed, options.level);
-      core::Rng cloud_rng(seed, 0xc1);
-      core::Rng sample_rng(seed, 0x5a);
-      for (int t = 0; t < task->spec().horizon; ++t) {
-        clouds.Make(env.model(), env.data(), env.base(), cloud_rng, scene.data(), arm.data());
-        SamplePoints(scene.data(), options.scene_points, arm.data(), options.arm_points, sampling,
-                     false, sample_rng, points.data_ptr<float>());
-        env.Proprio(proprio.data_ptr<float>());
-        const torch::Tensor out = net->forward(points, proprio);
-        sim::Action action;
-        if (discrete) {
-          action = sim::Action::Discrete(static_cast<int>(out.argmax(1).item<int64_t>()));
-        } else {
-          std::array<double, sim::kContinuousActionDim> v{};
-          for (int k = 0; k < sim::kContinuousActionDim; ++k) v[k] = out[0][k].item<double>();
-          action = sim::Action::Continuous(v);
+      core::Rng cloud_rng(seed, 0xc1), sample_rng(seed, 0x5a), action_rng(seed, 0xac);
+      PolicyEpisode& episode = episodes[j];
+      core::Episode& rec = episode.record;
+      if (record) {
+        rec.actions = core::FloatArray({std::size_t(horizon), discrete ? 1u : std::size_t(config.action_dim)});
+        rec.states = core::FloatArray({std::size_t(horizon), std::size_t(state_dim)});
+        rec.obs["proprio"] = core::FloatArray({std::size_t(horizon), std::size_t(sim::kProprioDim)});
+        if (points) {
+          rec.obs["scene_points"] = core::FloatArray({std::size_t(horizon), std::size_t(3 * options.scene_points)});
+          rec.obs["arm_points"] = core::FloatArray({std::size_t(horizon), std::size_t(3 * options.arm_points)});
+        }
+        rec.meta = {{"seed", seed}, {"level", options.level}, {"episode", first + j}};
+      }
+      int t = 0;
+      for (; t < horizon; ++t) {
+        env.State(state.data());
+        env.Proprio(proprio.data());
+        if (points) {
+          clouds->Make(env.model(), env.data(), env.base(), cloud_rng, scene.data(), arm.data());
+          SamplePoints(scene.data(), options.scene_points, arm.data(), options.arm_points,
+                       sampling, false, sample_rng, point_input.data_ptr<float>());
+        }
+        std::copy_n(points ? proprio.data() : state.data(), input_dim, input.data_ptr<float>());
+        const torch::Tensor out = net->forward(point_input, input);
+        const sim::Action action = ChooseAction(net, out, options, action_rng);
+        if (record) {
+          if (discrete)
+            rec.actions.row(t)[0] = float(action.index);
+          else
+            for (int k = 0; k < config.action_dim; ++k) rec.actions.row(t)[k] = float(action.value[k]);
+          std::copy(state.begin(), state.end(), rec.states.row(t));
+          std::copy(proprio.begin(), proprio.end(), rec.obs["proprio"].row(t));
+          if (points) {
+            std::copy(scene.begin(), scene.end(), rec.obs["scene_points"].row(t));
+            std::copy(arm.begin(), arm.end(), rec.obs["arm_points"].row(t));
+          }
         }
         const sim::StepResult r = env.Step(action);
+        if (record) {
+          rec.rewards.push_back(r.reward);
+          rec.dones.push_back(r.success || r.done);
+        }
         if (r.success) {
-          report.steps[i] = t + 1;
+          episode.steps = t + 1;
           break;
         }
         if (r.done) break;
       }
+      if (record) {
+        // Trim the rows to the steps taken.
+        const std::size_t taken = rec.rewards.size();
+        const auto trim = [taken](core::FloatArray& a) {
+          a.data.resize(taken * a.row_size());
+          a.shape[0] = taken;
+        };
+        trim(rec.actions);
+        trim(rec.states);
+        for (auto& [key, value] : rec.obs) trim(value);
+      }
     }
   });
-  for (int s : report.steps) report.successes += s > 0;
-  report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return episodes;
+}
+
+PolicyEvalReport EvaluatePolicy(PolicyNet& net, std::shared_ptr<const sim::Task> task,
+                                const PolicyEvalOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  net->eval();
+  PolicyEvalReport report;
+  report.episodes = options.episodes;
+  for (const PolicyEpisode& e : RunPolicyEpisodes(net, task, options, 0, options.episodes, false)) {
+    report.steps.push_back(e.steps);
+    report.successes += e.steps > 0;
+  }
+  report.seconds = SecondsSince(start);
+  return report;
+}
+
+PolicyEvalReport EvaluatePolicy(const std::filesystem::path& policy,
+                                std::shared_ptr<const sim::Task> task,
+                                const PolicyEvalOptions& options) {
+  PolicyNet net = LoadPolicy(policy);
+  CheckPolicyFitsTask(net->config(), *task, policy.string());
+  return EvaluatePolicy(net, std::move(task), options);
+}
+
+InverseDistillReport InverseDistill(const std::filesystem::path& policy,
+                                    std::shared_ptr<const sim::Task> task,
+                                    const InverseDistillOptions& options,
+                                    const std::filesystem::path& out, core::Progress* progress) {
+  const auto start = std::chrono::steady_clock::now();
+  if (options.successes <= 0 || options.round <= 0 || options.rollout.episodes <= 0)
+    throw core::ConfigError("train inverse-distill", "n",
+                            "positive numbers of demos, attempts and episodes per round");
+  PolicyNet net = LoadPolicy(policy);
+  CheckPolicyFitsTask(net->config(), *task, policy.string());
+  net->eval();
+  const nlohmann::json env_args = {
+      {"env_name", task->spec().name},
+      {"type", "twinforge"},
+      {"task", task->spec().name},
+      {"source", "sim:" + task->spec().scene},
+      {"policy", policy.string()},
+      {"action_mode", Discrete(*task) ? "discrete" : "continuous"},
+      {"level", options.rollout.level},
+      {"temperature", options.rollout.sample ? options.rollout.temperature : 0.0},
+      {"scene_points", options.rollout.scene_points},
+      {"arm_points", options.rollout.arm_points}};
+  core::DatasetWriter writer = core::DatasetWriter::Create(out, env_args);
+  InverseDistillReport report;
+  for (int64_t first = 0; report.successes < options.successes && first < options.rollout.episodes;
+       first += options.round) {
+    const int64_t count = std::min<int64_t>(options.round, options.rollout.episodes - first);
+    for (PolicyEpisode& e : RunPolicyEpisodes(net, task, options.rollout, first, count, true)) {
+      ++report.attempts;
+      if (e.steps < 0) continue;
+      // Every fifth kept demo is held out for validation, as `demos record` does.
+      writer.Add(e.record, report.successes % 5 == 4 ? core::Split::kValid : core::Split::kTrain);
+      if (++report.successes == options.successes) break;
+    }
+    if (progress)
+      progress->Set(report.successes, std::to_string(report.attempts) + " attempts");
+  }
+  report.seconds = SecondsSince(start);
+  spdlog::info("inverse distillation: {} of {} episodes succeeded ({:.0f}%), {} kept in {}",
+               report.successes, report.attempts, 100 * report.success_rate(), report.successes,
+               out.string());
   return report;
 }
 

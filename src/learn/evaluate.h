@@ -1,3 +1,5 @@
+// A policy's success rate in the sim, and inverse distillation.
+//
 // A policy's success rate in the sim (a twin or a hand-made task scene): N seeded episodes at a
 // randomization level, the policy acting greedily on the clouds a camera placed like the real
 // one sees (ray-cast depth with the depth-noise model, arm points from forward kinematics).
@@ -8,6 +10,7 @@
 #include <memory>
 #include <vector>
 
+#include "core/progress.h"
 #include "sim/task.h"
 
 namespace twinforge::learn {
@@ -18,6 +21,10 @@ struct PolicyEvalOptions {
   uint64_t seed = 1000;  // episode i is reset with MixSeed(seed, i), as `sim expert`'s
   int threads = 1;       // envs stepped in parallel (the outcome does not depend on it)
   int scene_points = 2048, arm_points = 512;  // as `demos record` stores them
+  // Greedy takes the most likely move (or the mean); sampling draws from the policy's
+  // distribution sharpened or widened by `temperature` (inverse distillation's noise).
+  bool sample = false;
+  double temperature = 1.0;
 };
 
 struct PolicyEvalReport {
@@ -31,5 +38,26 @@ struct PolicyEvalReport {
 PolicyEvalReport EvaluatePolicy(const std::filesystem::path& policy,
                                 std::shared_ptr<const sim::Task> task,
                                 const PolicyEvalOptions& options);
+
+// RialTo's inverse distillation: the policy learned from the real demos is rolled out in the twin
+// (with noise: options.sample), and only its successful episodes are kept, with privileged state,
+// as demos for RL. Episodes run in rounds of `round` so the demos kept do not depend on the
+// thread count.
+struct InverseDistillOptions {
+  PolicyEvalOptions rollout;  // episodes: the budget of attempts
+  int successes = 15;         // stop once this many are kept
+  int round = 16;
+};
+struct InverseDistillReport {
+  int attempts = 0, successes = 0;
+  double success_rate() const { return attempts ? double(successes) / attempts : 0.0; }
+  double seconds = 0;
+};
+// Writes the kept episodes to `out` (which must not exist), then returns the counts.
+InverseDistillReport InverseDistill(const std::filesystem::path& policy,
+                                    std::shared_ptr<const sim::Task> task,
+                                    const InverseDistillOptions& options,
+                                    const std::filesystem::path& out,
+                                    core::Progress* progress = nullptr);
 
 }  // namespace twinforge::learn

@@ -1,6 +1,9 @@
 #include "learn/policy_net.h"
 
+#include <torch/script.h>
+
 #include <cmath>
+#include <sstream>
 
 #include "core/error.h"
 #include "core/fs.h"
@@ -49,12 +52,23 @@ PolicyNetImpl::PolicyNetImpl(const PolicyConfig& config) : config_(config) {
   out->bias.zero_();
   if (!config.discrete)
     log_std = register_parameter("log_std", torch::full({config.action_dim}, std::log(0.5)));
+  obs_mean = register_buffer("obs_mean", torch::zeros({config.proprio_dim}));
+  obs_std = register_buffer("obs_std", torch::ones({config.proprio_dim}));
+}
+
+torch::Tensor PolicyNetImpl::Normalize(const torch::Tensor& proprio) const {
+  return ((proprio - obs_mean) / obs_std).clamp(-kObsClip, kObsClip);
+}
+
+torch::Tensor PolicyNetImpl::ForwardNormalized(const torch::Tensor& points,
+                                               const torch::Tensor& normalized) {
+  torch::Tensor x = normalized;
+  if (encoder_) x = torch::cat({encoder_->forward(points), normalized}, 1);
+  return head_->forward(x);
 }
 
 torch::Tensor PolicyNetImpl::forward(const torch::Tensor& points, const torch::Tensor& proprio) {
-  torch::Tensor x = proprio;
-  if (encoder_) x = torch::cat({encoder_->forward(points), proprio}, 1);
-  return head_->forward(x);
+  return ForwardNormalized(points, Normalize(proprio));
 }
 
 torch::Tensor PolicyNetImpl::LogProb(const torch::Tensor& output,
@@ -97,6 +111,50 @@ PolicyNet LoadPolicy(const std::filesystem::path& path) {
                       e.what_without_backtrace() + ")");
   }
   return net;
+}
+
+void ExportTorchScript(PolicyNet& net, const std::filesystem::path& path) {
+  torch::NoGradGuard no_grad;
+  const PolicyConfig& config = net->config();
+  torch::jit::Module module("TwinforgePolicy");
+  // Every tensor becomes an attribute named by its path with '_' for '.', e.g. head_0_weight.
+  const auto name = [](std::string n) {
+    for (char& c : n)
+      if (c == '.') c = '_';
+    return n;
+  };
+  for (const auto& p : net->named_parameters()) module.register_parameter(name(p.key()), p.value().clone(), false);
+  for (const auto& b : net->named_buffers()) module.register_buffer(name(b.key()), b.value().clone());
+  // The code mirrors PointEncoderImpl and PolicyNetImpl layer by layer.
+  std::ostringstream code;
+  const auto linear = [&](const std::string& in, const std::string& layer) {
+    return "torch.linear(" + in + ", self." + layer + "_weight, self." + layer + "_bias)";
+  };
+  const auto norm = [&](const std::string& in, const std::string& layer, int width) {
+    return "torch.layer_norm(" + in + ", [" + std::to_string(width) + "], self." + layer +
+           "_weight, self." + layer + "_bias, 1e-05)";
+  };
+  code << "def forward(self, points: Tensor, proprio: Tensor) -> Tensor:\n"
+       << "    x = torch.clamp((proprio - self.obs_mean) / self.obs_std, -" << PolicyNetImpl::kObsClip
+       << ", " << PolicyNetImpl::kObsClip << ")\n";
+  if (config.point_features > 0) {
+    const std::string e = "encoder_per_point_";
+    code << "    p = torch.relu(" << norm(linear("points", e + "0"), e + "1", 64) << ")\n"
+         << "    p = torch.relu(" << norm(linear("p", e + "3"), e + "4", 128) << ")\n"
+         << "    p = " << norm(linear("p", e + "6"), e + "7", 256) << "\n"
+         << "    p = torch.amax(p, 1)\n"
+         << "    p = " << norm(linear("p", "encoder_project_0"), "encoder_project_1", PointEncoderImpl::kOut)
+         << "\n"
+         << "    x = torch.cat([p, x], 1)\n";
+  }
+  code << "    x = torch.tanh(" << linear("x", "head_0") << ")\n"
+       << "    x = torch.tanh(" << linear("x", "head_2") << ")\n"
+       << "    return " << linear("x", "head_4") << "\n";
+  module.define(code.str());
+  const auto tmp = path.string() + ".tmp";
+  if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path());
+  module.save(tmp);
+  std::filesystem::rename(tmp, path);
 }
 
 int64_t ParameterCount(torch::nn::Module& module) {

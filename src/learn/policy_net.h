@@ -52,11 +52,20 @@ class PolicyNetImpl : public torch::nn::Module {
   explicit PolicyNetImpl(const PolicyConfig& config);
   // Discrete: logits [B, action_dim]. Continuous: the Gaussian's mean [B, action_dim] (its log
   // standard deviation is `log_std`). `points` may be undefined when point_features is 0.
+  // `proprio` is normalized first (see Normalize).
   torch::Tensor forward(const torch::Tensor& points, const torch::Tensor& proprio);
+  // (proprio - obs_mean) / obs_std, clipped to +-10: the observation normalization PPO learns
+  // for the privileged state. The buffers are saved with the weights; they stay 0 and 1 (no
+  // change) for a policy trained by BC.
+  torch::Tensor Normalize(const torch::Tensor& proprio) const;
+  // The head's output for an already normalized input.
+  torch::Tensor ForwardNormalized(const torch::Tensor& points, const torch::Tensor& normalized);
   // Log-likelihood of `actions` (discrete: [B] indices; continuous: [B, action_dim]), per row.
   torch::Tensor LogProb(const torch::Tensor& output, const torch::Tensor& actions) const;
   const PolicyConfig& config() const { return config_; }
   torch::Tensor log_std;  // [action_dim], continuous only
+  torch::Tensor obs_mean, obs_std;  // [proprio_dim] buffers
+  static constexpr double kObsClip = 10.0;
 
  private:
   PolicyConfig config_;
@@ -70,6 +79,11 @@ TORCH_MODULE(PolicyNet);
 void SavePolicy(PolicyNet& net, const std::filesystem::path& path);
 // Throws IoError when missing, Error naming the file when it is not a twinforge policy.
 PolicyNet LoadPolicy(const std::filesystem::path& path);
+
+// Writes the policy as a TorchScript module that Python loads with `torch.jit.load(path)`:
+// `forward(points [B, N, F], proprio [B, P]) -> logits or mean`, normalization included; for a
+// continuous policy `log_std` is an attribute. Point-free policies ignore `points`.
+void ExportTorchScript(PolicyNet& net, const std::filesystem::path& path);
 
 int64_t ParameterCount(torch::nn::Module& module);
 

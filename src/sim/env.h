@@ -27,6 +27,12 @@ constexpr int kProprioDim = 9;
 // chosen so that w >= 0): the twin, the proxy and a real robot's recorder all fill it here.
 void MakeProprio(const core::Pose& ee, double finger_left, double finger_right, float* out);
 
+// Size of a task's privileged state (see Env::State).
+inline int StateDim(const Task& task) {
+  return kProprioDim + 7 * int(task.index().object_bodies.size()) +
+         int(task.index().state_joints.size());
+}
+
 class Env {
  public:
   // `env_id` only names the env in messages; randomness comes from the seed given to Reset.
@@ -56,10 +62,7 @@ class Env {
 
   // Privileged state: proprioception, then per object position (3) and quaternion (4), then per
   // task joint its value; all in the robot base frame. Sizes are fixed per task.
-  int state_dim() const {
-    return kProprioDim + 7 * int(task_->index().object_bodies.size()) +
-           int(task_->index().state_joints.size());
-  }
+  int state_dim() const { return StateDim(*task_); }
   void State(float* out) const;
   void Proprio(float* out) const;
 

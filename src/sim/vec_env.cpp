@@ -59,6 +59,11 @@ void VecEnv::Reset() {
   });
 }
 
+void VecEnv::Reset(uint64_t seed) {
+  for (int i = 0; i < num_envs(); ++i) episode_rngs_[i] = core::Rng(seed, static_cast<uint64_t>(i));
+  Reset();
+}
+
 void VecEnv::Step(const Action* actions) {
   actions_ = actions;
   pool_.ParallelFor(num_envs(), step_fn_);

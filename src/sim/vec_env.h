@@ -28,6 +28,9 @@ class VecEnv {
 
   // Resets every env (new episodes) and fills the observation buffers.
   void Reset();
+  // Re-seeds env i's episode generator from (seed, i), then resets: a learner that resets with
+  // a seed drawn from its own counters needs to save nothing of the VecEnv to resume exactly.
+  void Reset(uint64_t seed);
   // Steps env i with actions[i] for all i (num_envs actions).
   void Step(const Action* actions);
 

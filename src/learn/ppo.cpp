@@ -1,0 +1,545 @@
+#include "learn/ppo.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <numeric>
+#include <sstream>
+
+#include "core/config.h"
+#include "core/dataset.h"
+#include "core/error.h"
+#include "core/log.h"
+#include "core/plot.h"
+#include "core/rng.h"
+#include "learn/policy_net.h"
+#include "learn/rollout.h"
+#include "sim/env.h"
+#include "sim/vec_env.h"
+
+namespace twinforge::learn {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double SecondsSince(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+// Streams of the per-iteration generators.
+enum Stream : uint64_t { kEnvSeeds = 1, kActions = 2, kShuffle = 3, kDemoBatches = 4 };
+
+// SB3's RunningMeanStd: mean and variance of every state seen, merged a batch at a time.
+struct RunningNorm {
+  double count = 1e-4;
+  std::vector<double> mean, var;
+  explicit RunningNorm(int dim = 0) : mean(dim, 0.0), var(dim, 1.0) {}
+  void Update(const torch::Tensor& rows) {  // [n, dim] float
+    const auto n = static_cast<double>(rows.size(0));
+    const torch::Tensor r = rows.to(torch::kDouble);
+    const torch::Tensor m = r.mean(0), v = r.var(0, false);
+    const double total = count + n;
+    for (std::size_t k = 0; k < mean.size(); ++k) {
+      const double bm = m[k].item<double>(), bv = v[k].item<double>();
+      const double delta = bm - mean[k];
+      mean[k] += delta * n / total;
+      var[k] = (var[k] * count + bv * n + delta * delta * count * n / total) / total;
+    }
+    count = total;
+  }
+  void CopyTo(PolicyNet& net) const {
+    torch::NoGradGuard no_grad;
+    for (std::size_t k = 0; k < mean.size(); ++k) {
+      net->obs_mean[k] = mean[k];
+      net->obs_std[k] = std::sqrt(var[k] + 1e-8);
+    }
+  }
+};
+
+struct CurveRow {
+  int iteration = 0;
+  int64_t env_steps = 0;
+  double seconds = 0, rollout_success = 0, eval_success = NAN;
+  double policy_loss = 0, value_loss = 0, bc_loss = NAN, entropy = 0, approx_kl = 0;
+  double update_samples_per_s = 0;
+};
+
+nlohmann::json RowJson(const CurveRow& r) {
+  const auto num = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(); };
+  return {r.iteration, r.env_steps, r.seconds, r.rollout_success, num(r.eval_success),
+          r.policy_loss, r.value_loss, num(r.bc_loss), r.entropy, r.approx_kl,
+          r.update_samples_per_s};
+}
+
+CurveRow RowFromJson(const nlohmann::json& j) {
+  const auto num = [](const nlohmann::json& v) { return v.is_null() ? NAN : v.get<double>(); };
+  CurveRow r;
+  r.iteration = j[0];
+  r.env_steps = j[1];
+  r.seconds = j[2];
+  r.rollout_success = j[3];
+  r.eval_success = num(j[4]);
+  r.policy_loss = j[5];
+  r.value_loss = j[6];
+  r.bc_loss = num(j[7]);
+  r.entropy = j[8];
+  r.approx_kl = j[9];
+  r.update_samples_per_s = j[10];
+  return r;
+}
+
+void WriteCurve(const std::vector<CurveRow>& rows, const std::filesystem::path& csv,
+                const std::filesystem::path& svg, const std::string& name) {
+  const auto tmp = csv.string() + ".tmp";
+  {
+    std::ofstream out(tmp);
+    if (!out) throw core::IoError("cannot write " + csv.string());
+    out << "iteration,env_steps,seconds,rollout_success,eval_success,policy_loss,value_loss,"
+           "bc_loss,entropy,approx_kl,update_samples_per_s\n";
+    const auto cell = [](double v) { return std::isfinite(v) ? std::to_string(v) : std::string(); };
+    for (const CurveRow& r : rows)
+      out << r.iteration << "," << r.env_steps << "," << r.seconds << "," << r.rollout_success
+          << "," << cell(r.eval_success) << "," << r.policy_loss << "," << r.value_loss << ","
+          << cell(r.bc_loss) << "," << r.entropy << "," << r.approx_kl << ","
+          << r.update_samples_per_s << "\n";
+    if (!out) throw core::IoError("cannot write " + csv.string());
+  }
+  std::filesystem::rename(tmp, csv);
+  core::PlotSeries by_steps[2], by_time[2];
+  by_steps[0].name = by_time[0].name = "training rollouts (sampled)";
+  by_steps[1].name = by_time[1].name = "evaluation (greedy)";
+  for (const CurveRow& r : rows) {
+    for (int k = 0; k < 2; ++k) {
+      by_steps[k].x.push_back(double(r.env_steps));
+      by_time[k].x.push_back(r.seconds / 60);
+    }
+    by_steps[0].y.push_back(r.rollout_success);
+    by_time[0].y.push_back(r.rollout_success);
+    by_steps[1].y.push_back(r.eval_success);
+    by_time[1].y.push_back(r.eval_success);
+  }
+  core::WriteSvgPlot(svg, {{name + ": success vs env steps", "env steps", "success", {by_steps[0], by_steps[1]}, true},
+                           {name + ": success vs wall-clock", "minutes", "success", {by_time[0], by_time[1]}, true}});
+}
+
+// The options that change what training computes (budgets and threads do not).
+nlohmann::json Fingerprint(const PpoOptions& options, const sim::Task& task,
+                           const std::filesystem::path& demos) {
+  nlohmann::json j = core::ToJson(options);
+  for (const char* k : {"threads", "max_seconds", "max_env_steps", "max_iterations", "target_success"})
+    j.erase(k);
+  j["task"] = task.spec().name;
+  j["scene"] = task.spec().scene;
+  j["demos"] = demos.empty() ? "" : std::filesystem::weakly_canonical(demos).string();
+  return j;
+}
+
+struct Demos {
+  torch::Tensor states, actions;  // [D, S], [D] long or [D, A]
+};
+
+Demos LoadSimDemos(const std::filesystem::path& path, int state_dim, bool discrete) {
+  core::DatasetReader reader(path);
+  std::vector<float> states, actions;
+  int64_t rows = 0, action_dim = 0;
+  for (const std::string& name : reader.demos()) {
+    const core::Episode e = reader.Read(name);
+    const std::string where = path.string() + ":data/" + name;
+    if (e.states.empty())
+      throw core::DatasetError(where + ": no privileged `states` (make the demos with `train "
+                                       "inverse-distill`)");
+    if (int(e.states.row_size()) != state_dim)
+      throw core::DatasetError(where + "/states: " + std::to_string(e.states.row_size()) +
+                               " values per step; this task's state has " +
+                               std::to_string(state_dim));
+    action_dim = static_cast<int64_t>(e.actions.row_size());
+    if (discrete && action_dim != 1)
+      throw core::DatasetError(where + "/actions: expected one move index per step");
+    states.insert(states.end(), e.states.data.begin(), e.states.data.end());
+    actions.insert(actions.end(), e.actions.data.begin(), e.actions.data.end());
+    rows += static_cast<int64_t>(e.length());
+  }
+  if (rows == 0) throw core::DatasetError(path.string() + ": no demo steps");
+  Demos d;
+  d.states = torch::from_blob(states.data(), {rows, state_dim}).clone();
+  d.actions = torch::from_blob(actions.data(), {rows, action_dim}).clone();
+  if (discrete) d.actions = d.actions.view({-1}).to(torch::kLong);
+  return d;
+}
+
+torch::nn::Sequential ValueNet(int in, int hidden) {
+  torch::nn::Linear out(hidden, 1);
+  {
+    torch::NoGradGuard no_grad;
+    out->weight.mul_(0.1);
+    out->bias.zero_();
+  }
+  return torch::nn::Sequential(torch::nn::Linear(in, hidden), torch::nn::Tanh(),
+                               torch::nn::Linear(hidden, hidden), torch::nn::Tanh(), out);
+}
+
+torch::Tensor Entropy(const PolicyNet& net, const torch::Tensor& out) {
+  if (net->config().discrete) {
+    const torch::Tensor logp = torch::log_softmax(out, 1);
+    return -(logp.exp() * logp).sum(1).mean();
+  }
+  return (net->log_std + 0.5 * std::log(2 * M_PI * M_E)).sum();
+}
+
+struct Checkpoint {
+  nlohmann::json state;  // fingerprint, counters, curve rows
+};
+
+void SaveCheckpoint(const std::filesystem::path& path, PolicyNet& policy,
+                    torch::nn::Sequential& value, torch::optim::Adam& optimizer,
+                    const RunningNorm& norm, const nlohmann::json& state) {
+  torch::serialize::OutputArchive archive, p, v, o;
+  policy->save(p);
+  value->save(v);
+  optimizer.save(o);
+  archive.write("policy", p);
+  archive.write("value", v);
+  archive.write("optimizer", o);
+  archive.write("norm_mean", torch::tensor(norm.mean, torch::kDouble));
+  archive.write("norm_var", torch::tensor(norm.var, torch::kDouble));
+  archive.write("norm_count", torch::tensor(norm.count, torch::kDouble));
+  archive.write("twinforge_ppo_state", c10::IValue(state.dump()));
+  const auto tmp = path.string() + ".tmp";
+  archive.save_to(tmp);
+  std::filesystem::rename(tmp, path);
+}
+
+nlohmann::json LoadCheckpoint(const std::filesystem::path& path, PolicyNet& policy,
+                              torch::nn::Sequential& value, torch::optim::Adam& optimizer,
+                              RunningNorm& norm) {
+  try {
+    torch::serialize::InputArchive archive, p, v, o;
+    archive.load_from(path.string());
+    c10::IValue text;
+    if (!archive.try_read("twinforge_ppo_state", text))
+      throw core::Error(path.string() + ": not a twinforge PPO checkpoint");
+    archive.read("policy", p);
+    archive.read("value", v);
+    archive.read("optimizer", o);
+    policy->load(p);
+    value->load(v);
+    optimizer.load(o);
+    torch::Tensor mean, var, count;
+    archive.read("norm_mean", mean);
+    archive.read("norm_var", var);
+    archive.read("norm_count", count);
+    if (mean.numel() != int64_t(norm.mean.size()))
+      throw core::Error(path.string() + ": normalizer of another state size");
+    for (std::size_t k = 0; k < norm.mean.size(); ++k) {
+      norm.mean[k] = mean[k].item<double>();
+      norm.var[k] = var[k].item<double>();
+    }
+    norm.count = count.item<double>();
+    return nlohmann::json::parse(text.toStringRef());
+  } catch (const c10::Error& e) {
+    throw core::Error(path.string() + ": unreadable checkpoint (" + e.what_without_backtrace() +
+                      "); delete it or pass --fresh");
+  }
+}
+
+double Median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+  return v[v.size() / 2];
+}
+
+}  // namespace
+
+PpoReport TrainPpo(std::shared_ptr<const sim::Task> task, const std::filesystem::path& demos,
+                   const std::filesystem::path& out, const PpoOptions& options, bool fresh,
+                   core::Progress* progress) {
+  const auto session_start = Clock::now();
+  const sim::TaskSpec& spec = task->spec();
+  const bool discrete = spec.control.action == sim::ActionMode::kDiscrete;
+  const int state_dim = sim::StateDim(*task);
+  const int horizon = spec.horizon;
+  const int N = options.num_envs;
+  const int64_t samples = int64_t(N) * horizon;
+
+  torch::manual_seed(options.seed);
+  PolicyConfig config;
+  config.point_features = 0;
+  config.proprio_dim = state_dim;
+  config.action_dim = discrete ? sim::kDiscreteActions : sim::kContinuousActionDim;
+  config.discrete = discrete;
+  config.hidden = options.hidden;
+  PolicyNet policy(config);
+  torch::nn::Sequential value = ValueNet(state_dim, options.hidden);
+  std::vector<torch::Tensor> params = policy->parameters();
+  for (const auto& p : value->parameters()) params.push_back(p);
+  torch::optim::Adam optimizer(params, torch::optim::AdamOptions(options.learning_rate).eps(1e-5));
+  RunningNorm norm(state_dim);
+
+  const bool use_demos = !demos.empty() && options.bc_coef > 0;
+  Demos demo;
+  if (use_demos) demo = LoadSimDemos(demos, state_dim, discrete);
+
+  PpoReport report;
+  report.demo_steps = use_demos ? static_cast<int>(demo.states.size(0)) : 0;
+  std::filesystem::path base = out;
+  base.replace_extension();
+  report.checkpoint = base.string() + ".ckpt";
+  report.curve_csv = base.string() + ".curve.csv";
+  report.curve_svg = base.string() + ".curve.svg";
+  if (out.has_parent_path()) std::filesystem::create_directories(out.parent_path());
+
+  const nlohmann::json fingerprint = Fingerprint(options, *task, demos);
+  std::vector<CurveRow> rows;
+  int iteration = 0;
+  int64_t env_steps = 0;
+  double seconds_before = 0;
+  report.best_eval_success = -1;
+  if (fresh) std::filesystem::remove(report.checkpoint);
+  if (std::filesystem::exists(report.checkpoint)) {
+    const nlohmann::json state = LoadCheckpoint(report.checkpoint, policy, value, optimizer, norm);
+    if (state.value("fingerprint", nlohmann::json()) != fingerprint)
+      throw core::Error(report.checkpoint.string() +
+                        ": made with another task, demos or options (" +
+                        state.value("fingerprint", nlohmann::json()).dump() + " vs " +
+                        fingerprint.dump() + "); pass --fresh to start over");
+    iteration = state["iteration"];
+    env_steps = state["env_steps"];
+    seconds_before = state["seconds"];
+    report.best_eval_success = state["best_eval_success"];
+    report.best_iteration = state["best_iteration"];
+    for (const auto& r : state["rows"]) rows.push_back(RowFromJson(r));
+    report.resumed_from = iteration;
+    spdlog::info("rl: resuming {} at iteration {} ({} env steps)", report.checkpoint.string(),
+                 iteration, env_steps);
+  }
+  spdlog::info("rl: task {} level {}, {} envs x {} steps per iteration, {} demo steps for BC, "
+               "{} + {} parameters",
+               spec.name, options.level, N, horizon, report.demo_steps, ParameterCount(*policy),
+               ParameterCount(*value));
+
+  sim::VecEnvOptions vec_options;
+  vec_options.num_envs = N;
+  vec_options.threads = options.threads;
+  vec_options.level = options.level;
+  sim::VecEnv vec(task, vec_options);
+
+  // Rollout buffers, allocated once.
+  const torch::Tensor raw = torch::empty({horizon, N, state_dim});
+  torch::Tensor obs = torch::empty({horizon, N, state_dim});
+  torch::Tensor actions = discrete ? torch::empty({horizon, N}, torch::kLong)
+                                   : torch::empty({horizon, N, config.action_dim});
+  torch::Tensor logps = torch::empty({horizon, N}), values = torch::empty({horizon + 1, N});
+  torch::Tensor rewards = torch::empty({horizon, N}), dones = torch::empty({horizon, N});
+  std::vector<sim::Action> step_actions(N);
+  std::vector<double> update_rates;
+
+  PolicyEvalOptions eval_options;
+  eval_options.episodes = options.eval_episodes;
+  eval_options.level = options.level;
+  eval_options.seed = options.eval_seed;
+  eval_options.threads = options.threads;
+
+  const auto elapsed = [&] { return seconds_before + SecondsSince(session_start); };
+  const auto budget_left = [&]() -> std::string {
+    if (options.max_iterations > 0 && iteration >= options.max_iterations) return "iterations";
+    if (options.max_env_steps > 0 && env_steps >= options.max_env_steps) return "env_steps";
+    if (options.max_seconds > 0 && elapsed() >= options.max_seconds) return "seconds";
+    return "";
+  };
+  report.stopped_by = budget_left();
+  if (!rows.empty() && std::isfinite(rows.back().eval_success) &&
+      rows.back().eval_success >= options.target_success)
+    report.stopped_by = "target";
+
+  while (report.stopped_by.empty()) {
+    ++iteration;
+    const auto iteration_start = Clock::now();
+    norm.CopyTo(policy);
+    policy->eval();
+    vec.Reset(core::MixSeed(options.seed, core::MixSeed(iteration, kEnvSeeds)));
+    core::Rng action_rng(core::MixSeed(options.seed, iteration), kActions);
+    int finished = 0, succeeded = 0;
+    {
+      torch::NoGradGuard no_grad;
+      for (int t = 0; t < horizon; ++t) {
+        const torch::Tensor s = torch::from_blob(const_cast<float*>(vec.states()), {N, state_dim});
+        raw[t].copy_(s);
+        obs[t].copy_(policy->Normalize(s));
+        const torch::Tensor o = policy->ForwardNormalized({}, obs[t]);
+        values[t].copy_(value->forward(obs[t]).view({-1}));
+        if (discrete) {
+          const torch::Tensor prob = torch::softmax(o, 1).contiguous();
+          const float* p = prob.data_ptr<float>();
+          int64_t* a = actions[t].data_ptr<int64_t>();
+          for (int i = 0; i < N; ++i) {
+            double u = action_rng.Uniform();
+            int k = config.action_dim - 1;
+            for (int j = 0; j < config.action_dim; ++j)
+              if ((u -= p[i * config.action_dim + j]) < 0) {
+                k = j;
+                break;
+              }
+            a[i] = k;
+            step_actions[i] = sim::Action::Discrete(k);
+          }
+        } else {
+          const torch::Tensor std = policy->log_std.exp();
+          torch::Tensor a = actions[t];
+          for (int i = 0; i < N; ++i) {
+            std::array<double, sim::kContinuousActionDim> v{};
+            for (int k = 0; k < config.action_dim; ++k) {
+              v[k] = o[i][k].item<double>() + std[k].item<double>() * action_rng.Normal();
+              a[i][k] = v[k];
+            }
+            step_actions[i] = sim::Action::Continuous(v);
+          }
+        }
+        logps[t].copy_(policy->LogProb(o, actions[t]));
+        vec.Step(step_actions.data());
+        for (int i = 0; i < N; ++i) {
+          rewards[t][i] = vec.rewards()[i];
+          dones[t][i] = float(vec.dones()[i]);
+          if (vec.dones()[i]) {
+            ++finished;
+            succeeded += vec.episode_success()[i];
+          }
+        }
+      }
+      const torch::Tensor s = torch::from_blob(const_cast<float*>(vec.states()), {N, state_dim});
+      values[horizon].copy_(value->forward(policy->Normalize(s)).view({-1}));
+    }
+    env_steps += samples;
+    // GAE(lambda); an episode's end (horizon or instability) is terminal.
+    torch::Tensor advantages = torch::empty({horizon, N});
+    {
+      const float* r = rewards.data_ptr<float>();
+      const float* d = dones.data_ptr<float>();
+      const float* v = values.data_ptr<float>();
+      float* adv = advantages.data_ptr<float>();
+      std::vector<float> next(N, 0.0f);
+      for (int t = horizon - 1; t >= 0; --t)
+        for (int i = 0; i < N; ++i) {
+          const float keep = 1.0f - d[t * N + i];
+          const float delta = r[t * N + i] +
+                              float(options.gamma) * v[(t + 1) * N + i] * keep - v[t * N + i];
+          next[i] = delta + float(options.gamma * options.lambda) * keep * next[i];
+          adv[t * N + i] = next[i];
+        }
+    }
+    const torch::Tensor returns = (advantages + values.slice(0, 0, horizon)).view({-1});
+    const torch::Tensor flat_obs = obs.view({samples, state_dim});
+    const torch::Tensor flat_actions =
+        discrete ? actions.view({-1}) : actions.view({samples, config.action_dim});
+    const torch::Tensor flat_logp = logps.view({-1}), flat_adv = advantages.view({-1});
+
+    // PPO epochs.
+    const auto update_start = Clock::now();
+    policy->train();
+    core::Rng shuffle_rng(core::MixSeed(options.seed, iteration), kShuffle);
+    core::Rng demo_rng(core::MixSeed(options.seed, iteration), kDemoBatches);
+    std::vector<int64_t> order(samples);
+    std::iota(order.begin(), order.end(), 0);
+    const int64_t mb = (samples + options.minibatches - 1) / options.minibatches;
+    CurveRow row;
+    int updates = 0;
+    double bc_total = 0;
+    for (int epoch = 0; epoch < options.epochs; ++epoch) {
+      shuffle_rng.Shuffle(order);
+      for (int64_t at = 0; at < samples; at += mb) {
+        const int64_t n = std::min(mb, samples - at);
+        const torch::Tensor idx = torch::from_blob(order.data() + at, {n}, torch::kLong);
+        const torch::Tensor o = policy->ForwardNormalized({}, flat_obs.index_select(0, idx));
+        const torch::Tensor logp = policy->LogProb(o, flat_actions.index_select(0, idx));
+        torch::Tensor adv = flat_adv.index_select(0, idx);
+        adv = (adv - adv.mean()) / (adv.std() + 1e-8);
+        const torch::Tensor ratio = (logp - flat_logp.index_select(0, idx)).exp();
+        const torch::Tensor policy_loss =
+            -torch::min(ratio * adv, ratio.clamp(1 - options.clip, 1 + options.clip) * adv).mean();
+        const torch::Tensor v = value->forward(flat_obs.index_select(0, idx)).view({-1});
+        const torch::Tensor value_loss = (returns.index_select(0, idx) - v).pow(2).mean();
+        const torch::Tensor entropy = Entropy(policy, o);
+        torch::Tensor loss = policy_loss + options.value_coef * value_loss -
+                             options.entropy_coef * entropy;
+        if (use_demos) {
+          std::vector<int64_t> pick(options.bc_batch);
+          for (auto& k : pick) k = static_cast<int64_t>(demo_rng.Index(demo.states.size(0)));
+          const torch::Tensor di = torch::from_blob(pick.data(), {options.bc_batch}, torch::kLong);
+          const torch::Tensor d_out = policy->forward({}, demo.states.index_select(0, di));
+          const torch::Tensor bc = -policy->LogProb(d_out, demo.actions.index_select(0, di)).mean();
+          loss = loss + options.bc_coef * bc;
+          bc_total += bc.item<double>();
+        }
+        optimizer.zero_grad();
+        loss.backward();
+        torch::nn::utils::clip_grad_norm_(params, options.max_grad_norm);
+        optimizer.step();
+        ++updates;
+        row.policy_loss += policy_loss.item<double>();
+        row.value_loss += value_loss.item<double>();
+        row.entropy += entropy.item<double>();
+        torch::NoGradGuard no_grad;
+        row.approx_kl += ((ratio - 1) - ratio.log()).mean().item<double>();
+      }
+    }
+    const double update_seconds = SecondsSince(update_start);
+    norm.Update(raw.view({samples, state_dim}));
+    row.iteration = iteration;
+    row.env_steps = env_steps;
+    row.rollout_success = finished ? double(succeeded) / finished : 0.0;
+    row.policy_loss /= updates;
+    row.value_loss /= updates;
+    row.entropy /= updates;
+    row.approx_kl /= updates;
+    row.bc_loss = use_demos ? bc_total / updates : NAN;
+    row.update_samples_per_s = double(samples) * options.epochs / update_seconds;
+    update_rates.push_back(row.update_samples_per_s);
+
+    const bool last_by_budget = !budget_left().empty();
+    if (iteration % options.eval_every == 0 || last_by_budget) {
+      const PolicyEvalReport eval = EvaluatePolicy(policy, task, eval_options);
+      row.eval_success = eval.success_rate();
+      if (row.eval_success > report.best_eval_success) {
+        report.best_eval_success = row.eval_success;
+        report.best_iteration = iteration;
+        SavePolicy(policy, out);
+      }
+    }
+    row.seconds = elapsed();
+    rows.push_back(row);
+    WriteCurve(rows, report.curve_csv, report.curve_svg, spec.name);
+    nlohmann::json state = {{"fingerprint", fingerprint},
+                            {"iteration", iteration},
+                            {"env_steps", env_steps},
+                            {"seconds", row.seconds},
+                            {"best_eval_success", report.best_eval_success},
+                            {"best_iteration", report.best_iteration},
+                            {"rows", nlohmann::json::array()}};
+    for (const CurveRow& r : rows) state["rows"].push_back(RowJson(r));
+    SaveCheckpoint(report.checkpoint, policy, value, optimizer, norm, state);
+    std::ostringstream note;
+    note.precision(2);
+    note << "success " << row.rollout_success;
+    if (std::isfinite(row.eval_success)) note << ", eval " << row.eval_success;
+    note << ", " << std::lround(SecondsSince(iteration_start) * 10) / 10.0 << " s/it";
+    if (progress) progress->Set(iteration, note.str());
+    spdlog::debug("rl: iteration {} {}", iteration, note.str());
+    if (std::isfinite(row.eval_success) && row.eval_success >= options.target_success)
+      report.stopped_by = "target";
+    else
+      report.stopped_by = budget_left();
+  }
+  report.iterations = iteration;
+  report.env_steps = env_steps;
+  report.seconds = elapsed();
+  report.update_samples_per_s = Median(update_rates);
+  if (report.best_iteration == 0) {  // no evaluation ran: keep the last weights
+    SavePolicy(policy, out);
+    report.best_iteration = iteration;
+  }
+  report.best_eval_success = std::max(0.0, report.best_eval_success);
+  return report;
+}
+
+}  // namespace twinforge::learn

@@ -1,0 +1,99 @@
+// RialTo's RL fine-tuning: PPO on privileged state over the VecEnv, with the task's sparse success
+// reward and randomization, plus a BC loss on the sim demos from inverse distillation.
+//
+// One rollout is one episode per env (the task's horizon), every env reset at the start of each
+// iteration from a seed drawn from (seed, iteration). Action sampling, minibatch order and demo
+// batches draw from generators seeded the same way, so a checkpoint needs only the networks, the
+// optimizer, the normalizer and the counters to resume step for step.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <string>
+
+#include "core/progress.h"
+#include "sim/task.h"
+
+namespace twinforge::learn {
+
+struct PpoOptions {
+  int num_envs = 64;
+  int threads = 2;  // envs stepped in parallel; results do not depend on it
+  int level = 1;    // randomization level of the training episodes
+  uint64_t seed = 1;
+  int hidden = 256;  // policy and value MLPs: two layers this wide
+  // SB3's PPO defaults, as RialTo used them.
+  double learning_rate = 3e-4, gamma = 0.99, lambda = 0.95, clip = 0.2;
+  int epochs = 10;
+  int minibatches = 4;  // per epoch
+  double max_grad_norm = 0.5, value_coef = 0.5, entropy_coef = 0.0;
+  // BC on the sim demos: cross-entropy (or Gaussian log-likelihood) of a fresh batch of demo
+  // steps at every minibatch, weighted by bc_coef. No demos: PPO from scratch.
+  double bc_coef = 0.1;
+  int bc_batch = 32;
+  // Stopping: greedy success over eval_episodes (their own seeds) every eval_every iterations
+  // reaching target_success, or a budget (0: none).
+  double target_success = 0.9;
+  int eval_every = 5;
+  int eval_episodes = 50;
+  uint64_t eval_seed = 7000;
+  double max_seconds = 1200;
+  int64_t max_env_steps = 0;
+  int max_iterations = 0;
+  template <class A>
+  void Serialize(A& a) {
+    a("num_envs", num_envs);
+    a("threads", threads);
+    a("level", level);
+    a("seed", seed);
+    a("hidden", hidden);
+    a("learning_rate", learning_rate);
+    a("gamma", gamma);
+    a("lambda", lambda);
+    a("clip", clip);
+    a("epochs", epochs);
+    a("minibatches", minibatches);
+    a("max_grad_norm", max_grad_norm);
+    a("value_coef", value_coef);
+    a("entropy_coef", entropy_coef);
+    a("bc_coef", bc_coef);
+    a("bc_batch", bc_batch);
+    a("target_success", target_success);
+    a("eval_every", eval_every);
+    a("eval_episodes", eval_episodes);
+    a("eval_seed", eval_seed);
+    a("max_seconds", max_seconds);
+    a("max_env_steps", max_env_steps);
+    a("max_iterations", max_iterations);
+    a.Require(num_envs > 0 && threads > 0 && hidden > 0, "num_envs",
+              "positive env, thread and layer counts");
+    a.Require(epochs > 0 && minibatches > 0 && bc_batch > 0, "epochs",
+              "positive epoch, minibatch and batch counts");
+    a.Require(learning_rate > 0 && clip > 0, "learning_rate", "a positive rate and clip");
+    a.Require(eval_every > 0 && eval_episodes > 0, "eval_every", "positive evaluation counts");
+  }
+};
+
+struct PpoReport {
+  int iterations = 0;
+  int64_t env_steps = 0;
+  double seconds = 0;  // wall-clock over every session of the run
+  double best_eval_success = 0;
+  int best_iteration = 0;        // whose weights are in `out`
+  int resumed_from = 0;          // iteration of the checkpoint this session started from
+  std::string stopped_by;        // target | seconds | env_steps | iterations
+  double update_samples_per_s = 0;  // median over this session's iterations
+  int demo_steps = 0;
+  std::filesystem::path curve_csv, curve_svg, checkpoint;
+};
+
+// Trains a state policy for `task` and writes the best-evaluated weights to `out`, the curve
+// (CSV and SVG) beside it and a checkpoint `<out>.ckpt` after every iteration. When that
+// checkpoint exists and was made with the same task, demos and options (budgets and threads
+// aside), training resumes from it; `fresh` discards it. `demos` empty: no BC loss.
+PpoReport TrainPpo(std::shared_ptr<const sim::Task> task, const std::filesystem::path& demos,
+                   const std::filesystem::path& out, const PpoOptions& options, bool fresh = false,
+                   core::Progress* progress = nullptr);
+
+}  // namespace twinforge::learn

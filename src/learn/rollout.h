@@ -1,0 +1,42 @@
+// Episodes of a policy network in the sim: what `sim eval` measures, what inverse distillation
+// records and what PPO's periodic evaluation runs. A point-cloud policy sees the task camera's
+// ray-cast clouds (depth-noise model; arm points from forward kinematics); a state policy (no
+// point features) sees the privileged state.
+//
+// Includes <torch/torch.h> (via policy_net.h): include it only from learn's .cpp files and tests.
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "core/dataset.h"
+#include "learn/evaluate.h"
+#include "learn/policy_net.h"
+#include "sim/task.h"
+
+namespace twinforge::learn {
+
+struct PolicyEpisode {
+  int steps = -1;         // control steps to success, -1 on failure
+  core::Episode record;   // when asked for: every step up to success (or the horizon)
+};
+
+// Throws Error naming `what` (e.g. the policy file) when the network's inputs or actions do not
+// fit the task.
+void CheckPolicyFitsTask(const PolicyConfig& config, const sim::Task& task,
+                         const std::string& what);
+
+// Runs episodes first .. first + count - 1, episode i reset with MixSeed(options.seed, i) at
+// options.level, split over options.threads; the outcome does not depend on the thread count.
+// With `record`, each episode keeps its steps (actions, privileged `states`, rewards, dones,
+// obs/proprio and, for a point-cloud policy, obs/scene_points and obs/arm_points).
+std::vector<PolicyEpisode> RunPolicyEpisodes(PolicyNet& net, std::shared_ptr<const sim::Task> task,
+                                             const PolicyEvalOptions& options, int64_t first,
+                                             int64_t count, bool record);
+
+// Success rate of an in-memory policy over options.episodes.
+PolicyEvalReport EvaluatePolicy(PolicyNet& net, std::shared_ptr<const sim::Task> task,
+                                const PolicyEvalOptions& options);
+
+}  // namespace twinforge::learn
