@@ -60,8 +60,9 @@ void AddInverseDistill(CLI::App& train, int& exit_code) {
       "roll a real-demo policy out in the twin; keep its successes as sim demos (JSON report)");
   c->add_option("--policy", cli->policy, "policy from `train bc`")->required();
   c->add_option("--task", cli->task, "task name (the twin's) or task.yaml")->required();
-  c->add_option("--twin", cli->twin, "twin directory (`twin build --out`); default: the task's "
-                                     "own scene");
+  c->add_option("--twin", cli->twin,
+                "twin directory (`twin build --out`); default: the task's "
+                "own scene");
   c->add_option("--n", cli->options.successes, "successful episodes to keep")
       ->check(CLI::PositiveNumber);
   c->add_option("--max-episodes", cli->options.rollout.episodes, "budget of attempts")
@@ -93,8 +94,8 @@ void AddInverseDistill(CLI::App& train, int& exit_code) {
     std::cout << report.dump(2) << "\n";
     exit_code = r.successes >= cli->options.successes ? 0 : 3;
     if (exit_code)
-      spdlog::error("inverse distillation: only {} of {} demos within {} attempts",
-                    r.successes, cli->options.successes, r.attempts);
+      spdlog::error("inverse distillation: only {} of {} demos within {} attempts", r.successes,
+                    cli->options.successes, r.attempts);
   });
 }
 
@@ -106,8 +107,9 @@ void AddRl(CLI::App& train, int& exit_code) {
   c->add_option("--twin", cli->twin, "twin directory; default: the task's own scene");
   c->add_option("--demos", cli->demos, "sim demos from `train inverse-distill`, or none")
       ->required();
-  c->add_option("--out", cli->out, "teacher policy; curve (.curve.csv/.svg) and checkpoint "
-                                   "(.ckpt) beside it")
+  c->add_option("--out", cli->out,
+                "teacher policy; curve (.curve.csv/.svg) and checkpoint "
+                "(.ckpt) beside it")
       ->required();
   auto& o = cli->options;
   c->add_option("--envs", o.num_envs, "parallel environments")->check(CLI::PositiveNumber);

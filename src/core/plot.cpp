@@ -19,10 +19,14 @@ const char* const kColours[] = {"#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#94
 std::string Escape(const std::string& text) {
   std::string out;
   for (char c : text) {
-    if (c == '<') out += "&lt;";
-    else if (c == '>') out += "&gt;";
-    else if (c == '&') out += "&amp;";
-    else out += c;
+    if (c == '<')
+      out += "&lt;";
+    else if (c == '>')
+      out += "&gt;";
+    else if (c == '&')
+      out += "&amp;";
+    else
+      out += c;
   }
   return out;
 }
@@ -61,11 +65,11 @@ void Panel(std::ostream& svg, const PlotPanel& panel, double x0) {
         << Number(xv) << "</text>\n";
     svg << "<text x='" << x0 + kLeft - 4 << "' y='" << Y(yv) + 4 << "' text-anchor='end'>"
         << Number(yv) << "</text>\n";
-    svg << "<line x1='" << x0 + kLeft << "' x2='" << x0 + kLeft + w << "' y1='" << Y(yv)
-        << "' y2='" << Y(yv) << "' stroke='#eee'/>\n";
+    svg << "<line x1='" << x0 + kLeft << "' x2='" << x0 + kLeft + w << "' y1='" << Y(yv) << "' y2='"
+        << Y(yv) << "' stroke='#eee'/>\n";
   }
-  svg << "<text x='" << x0 + kLeft + w / 2 << "' y='" << kHeight - 8
-      << "' text-anchor='middle'>" << Escape(panel.x_label) << "</text>\n";
+  svg << "<text x='" << x0 + kLeft + w / 2 << "' y='" << kHeight - 8 << "' text-anchor='middle'>"
+      << Escape(panel.x_label) << "</text>\n";
   svg << "<text transform='translate(" << x0 + 14 << "," << kTop + h / 2
       << ") rotate(-90)' text-anchor='middle'>" << Escape(panel.y_label) << "</text>\n";
   for (std::size_t k = 0; k < panel.series.size(); ++k) {
@@ -78,8 +82,7 @@ void Panel(std::ostream& svg, const PlotPanel& panel, double x0) {
       path += (pen_down ? " L" : "M") + Number(X(s.x[i])) + "," + Number(Y(s.y[i]));
       pen_down = true;
     }
-    svg << "<path d='" << path << "' fill='none' stroke='" << colour
-        << "' stroke-width='1.5'/>\n";
+    svg << "<path d='" << path << "' fill='none' stroke='" << colour << "' stroke-width='1.5'/>\n";
     svg << "<text x='" << x0 + kLeft + 6 << "' y='" << kTop + 14 + 14 * k << "' fill='" << colour
         << "'>" << Escape(s.name) << "</text>\n";
   }
@@ -88,6 +91,7 @@ void Panel(std::ostream& svg, const PlotPanel& panel, double x0) {
 }  // namespace
 
 void WriteSvgPlot(const std::filesystem::path& path, const std::vector<PlotPanel>& panels) {
+  if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path());
   const auto tmp = path.string() + ".tmp";
   {
     std::ofstream svg(tmp);

@@ -1,6 +1,7 @@
 #include "learn/bc.h"
 
 #include <gtest/gtest.h>
+#include <torch/script.h>
 
 #include <fstream>
 
@@ -156,6 +157,44 @@ TEST(SamplePoints, DropsJittersAndFlagsTheArm) {
   }
   EXPECT_GE(distinct.size(), 275u);
   EXPECT_LE(distinct.size(), 365u);
+}
+
+// The TorchScript file (what Python's torch.jit.load reads) computes what the C++ network does,
+// normalization included, for point-cloud and state policies, discrete and continuous.
+TEST(PolicyNet, TorchScriptExportGivesTheSameOutputs) {
+  const auto dir = core::testing::TestDir("bc_test", "torchscript");
+  for (const bool points : {true, false})
+    for (const bool discrete : {true, false}) {
+      PolicyConfig config;
+      config.point_features = points ? 4 : 0;
+      config.points = 64;
+      config.proprio_dim = points ? 9 : 17;
+      config.discrete = discrete;
+      config.action_dim = discrete ? 14 : 7;
+      torch::manual_seed(points * 2 + discrete);
+      PolicyNet net(config);
+      {
+        torch::NoGradGuard no_grad;
+        for (auto& p : net->parameters()) p.add_(torch::randn_like(p) * 0.1);
+        net->obs_mean.copy_(torch::randn({config.proprio_dim}));
+        net->obs_std.copy_(torch::rand({config.proprio_dim}) + 0.5);
+      }
+      const auto file =
+          dir / ("policy_" + std::to_string(points) + std::to_string(discrete) + ".ts");
+      ExportTorchScript(net, file);
+      torch::jit::Module loaded = torch::jit::load(file.string());
+      const torch::Tensor cloud = torch::randn({3, 64, 4}),
+                          proprio = torch::randn({3, config.proprio_dim});
+      torch::NoGradGuard no_grad;
+      net->eval();
+      const torch::Tensor expected = net->forward(cloud, proprio);
+      const torch::Tensor got = loaded.forward({cloud, proprio}).toTensor();
+      ASSERT_EQ(got.sizes(), expected.sizes());
+      EXPECT_TRUE(torch::allclose(got, expected, 1e-5, 1e-5))
+          << "points " << points << " discrete " << discrete << " max diff "
+          << (got - expected).abs().max().item<float>();
+      if (!discrete) EXPECT_TRUE(torch::equal(loaded.attr("log_std").toTensor(), net->log_std));
+    }
 }
 
 }  // namespace

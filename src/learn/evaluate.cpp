@@ -66,9 +66,8 @@ void CheckPolicyFitsTask(const PolicyConfig& config, const sim::Task& task,
                       std::to_string(config.proprio_dim) + "-d " +
                       (points ? "proprioception and points" : "state") + "; task '" +
                       task.spec().name + "' needs " + std::to_string(action_dim) +
-                      (discrete ? " discrete" : "") + " actions from " +
-                      std::to_string(input_dim) + "-d " +
-                      (points ? "proprioception and points" : "privileged state"));
+                      (discrete ? " discrete" : "") + " actions from " + std::to_string(input_dim) +
+                      "-d " + (points ? "proprioception and points" : "privileged state"));
 }
 
 std::vector<PolicyEpisode> RunPolicyEpisodes(PolicyNet& net, std::shared_ptr<const sim::Task> task,
@@ -106,12 +105,16 @@ std::vector<PolicyEpisode> RunPolicyEpisodes(PolicyNet& net, std::shared_ptr<con
       PolicyEpisode& episode = episodes[j];
       core::Episode& rec = episode.record;
       if (record) {
-        rec.actions = core::FloatArray({std::size_t(horizon), discrete ? 1u : std::size_t(config.action_dim)});
+        rec.actions = core::FloatArray(
+            {std::size_t(horizon), discrete ? 1u : std::size_t(config.action_dim)});
         rec.states = core::FloatArray({std::size_t(horizon), std::size_t(state_dim)});
-        rec.obs["proprio"] = core::FloatArray({std::size_t(horizon), std::size_t(sim::kProprioDim)});
+        rec.obs["proprio"] =
+            core::FloatArray({std::size_t(horizon), std::size_t(sim::kProprioDim)});
         if (points) {
-          rec.obs["scene_points"] = core::FloatArray({std::size_t(horizon), std::size_t(3 * options.scene_points)});
-          rec.obs["arm_points"] = core::FloatArray({std::size_t(horizon), std::size_t(3 * options.arm_points)});
+          rec.obs["scene_points"] =
+              core::FloatArray({std::size_t(horizon), std::size_t(3 * options.scene_points)});
+          rec.obs["arm_points"] =
+              core::FloatArray({std::size_t(horizon), std::size_t(3 * options.arm_points)});
         }
         rec.meta = {{"seed", seed}, {"level", options.level}, {"episode", first + j}};
       }
@@ -121,8 +124,8 @@ std::vector<PolicyEpisode> RunPolicyEpisodes(PolicyNet& net, std::shared_ptr<con
         env.Proprio(proprio.data());
         if (points) {
           clouds->Make(env.model(), env.data(), env.base(), cloud_rng, scene.data(), arm.data());
-          SamplePoints(scene.data(), options.scene_points, arm.data(), options.arm_points,
-                       sampling, false, sample_rng, point_input.data_ptr<float>());
+          SamplePoints(scene.data(), options.scene_points, arm.data(), options.arm_points, sampling,
+                       false, sample_rng, point_input.data_ptr<float>());
         }
         std::copy_n(points ? proprio.data() : state.data(), input_dim, input.data_ptr<float>());
         const torch::Tensor out = net->forward(point_input, input);
@@ -131,7 +134,8 @@ std::vector<PolicyEpisode> RunPolicyEpisodes(PolicyNet& net, std::shared_ptr<con
           if (discrete)
             rec.actions.row(t)[0] = float(action.index);
           else
-            for (int k = 0; k < config.action_dim; ++k) rec.actions.row(t)[k] = float(action.value[k]);
+            for (int k = 0; k < config.action_dim; ++k)
+              rec.actions.row(t)[k] = float(action.value[k]);
           std::copy(state.begin(), state.end(), rec.states.row(t));
           std::copy(proprio.begin(), proprio.end(), rec.obs["proprio"].row(t));
           if (points) {
@@ -222,8 +226,7 @@ InverseDistillReport InverseDistill(const std::filesystem::path& policy,
       writer.Add(e.record, report.successes % 5 == 4 ? core::Split::kValid : core::Split::kTrain);
       if (++report.successes == options.successes) break;
     }
-    if (progress)
-      progress->Set(report.successes, std::to_string(report.attempts) + " attempts");
+    if (progress) progress->Set(report.successes, std::to_string(report.attempts) + " attempts");
   }
   report.seconds = SecondsSince(start);
   spdlog::info("inverse distillation: {} of {} episodes succeeded ({:.0f}%), {} kept in {}",

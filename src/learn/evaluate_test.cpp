@@ -2,10 +2,13 @@
 
 #include <gtest/gtest.h>
 
+#include "core/dataset.h"
 #include "core/error.h"
 #include "core/test_support.h"
 #include "learn/policy_net.h"
+#include "learn/test_support.h"
 #include "learn/torch_runtime.h"
+#include "sim/env.h"
 
 namespace twinforge::learn {
 namespace {
@@ -49,6 +52,72 @@ TEST(EvaluatePolicy, APolicyForOtherActionsIsRefusedByName) {
     EXPECT_NE(std::string(e.what()).find("policy.pt"), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("peg_insertion"), std::string::npos) << e.what();
   }
+}
+
+// An untrained point-cloud policy, sampled, succeeds now and then on the tiny task: only those
+// episodes are kept, each ends at its first success, and replaying its actions from its seed in
+// the sim succeeds at the same step.
+TEST(InverseDistill, KeepsOnlySuccessfulEpisodesWithPrivilegedState) {
+  PinMathThreads(1);
+  auto task = testing::ReachTask(0.2);
+  const auto dir = core::testing::TestDir("evaluate_test", "inverse");
+  PolicyConfig config;
+  config.points = 128;
+  torch::manual_seed(11);
+  PolicyNet net(config);
+  SavePolicy(net, dir / "policy.pt");
+  InverseDistillOptions o;
+  o.rollout.sample = true;
+  o.rollout.episodes = 64;
+  o.rollout.threads = 2;
+  o.rollout.scene_points = 256;
+  o.rollout.arm_points = 64;
+  o.successes = 3;
+  o.round = 8;
+  std::filesystem::remove(dir / "sim.hdf5");
+  const InverseDistillReport r = InverseDistill(dir / "policy.pt", task, o, dir / "sim.hdf5");
+  ASSERT_EQ(r.successes, 3);
+  EXPECT_GT(r.attempts, r.successes);  // failures were tried and dropped
+  core::DatasetReader reader(dir / "sim.hdf5");
+  ASSERT_EQ(reader.demos().size(), 3u);
+  EXPECT_EQ(reader.env_args()["action_mode"], "discrete");
+  for (const std::string& name : reader.demos()) {
+    const core::Episode e = reader.Read(name);
+    ASSERT_GT(e.length(), 0u);
+    EXPECT_EQ(int(e.states.row_size()), sim::StateDim(*task));
+    EXPECT_EQ(e.obs.at("scene_points").row_size(), 3u * 256);
+    EXPECT_EQ(e.obs.at("arm_points").row_size(), 3u * 64);
+    EXPECT_GT(e.rewards.back(), 0.f);
+    sim::Env env(task);
+    env.Reset(e.meta["seed"].get<uint64_t>(), e.meta["level"].get<int>());
+    std::vector<float> state(e.states.row_size());
+    for (std::size_t t = 0; t < e.length(); ++t) {
+      env.State(state.data());
+      EXPECT_TRUE(std::equal(state.begin(), state.end(), e.states.row(t))) << name << " " << t;
+      const sim::StepResult step = env.Step(sim::Action::Discrete(int(e.actions.row(t)[0])));
+      EXPECT_EQ(step.success, t + 1 == e.length()) << name << " step " << t;
+    }
+  }
+}
+
+// A privileged-state policy (no point features) runs on the state, and its size is checked
+// against the task's state.
+TEST(EvaluatePolicy, AStatePolicyRunsOnThePrivilegedState) {
+  PinMathThreads(1);
+  auto task = testing::ReachTask();
+  const auto dir = core::testing::TestDir("evaluate_test", "state");
+  PolicyConfig config;
+  config.point_features = 0;
+  config.proprio_dim = sim::StateDim(*task);
+  PolicyNet net(config);
+  SavePolicy(net, dir / "state.pt");
+  PolicyEvalOptions o;
+  o.episodes = 3;
+  EXPECT_EQ(EvaluatePolicy(dir / "state.pt", task, o).episodes, 3);
+  config.proprio_dim += 1;
+  PolicyNet wrong(config);
+  SavePolicy(wrong, dir / "wrong.pt");
+  EXPECT_THROW(EvaluatePolicy(dir / "wrong.pt", task, o), core::Error);
 }
 
 }  // namespace

@@ -123,8 +123,10 @@ void ExportTorchScript(PolicyNet& net, const std::filesystem::path& path) {
       if (c == '.') c = '_';
     return n;
   };
-  for (const auto& p : net->named_parameters()) module.register_parameter(name(p.key()), p.value().clone(), false);
-  for (const auto& b : net->named_buffers()) module.register_buffer(name(b.key()), b.value().clone());
+  for (const auto& p : net->named_parameters())
+    module.register_parameter(name(p.key()), p.value().clone(), false);
+  for (const auto& b : net->named_buffers())
+    module.register_buffer(name(b.key()), b.value().clone());
   // The code mirrors PointEncoderImpl and PolicyNetImpl layer by layer.
   std::ostringstream code;
   const auto linear = [&](const std::string& in, const std::string& layer) {
@@ -135,15 +137,16 @@ void ExportTorchScript(PolicyNet& net, const std::filesystem::path& path) {
            "_weight, self." + layer + "_bias, 1e-05)";
   };
   code << "def forward(self, points: Tensor, proprio: Tensor) -> Tensor:\n"
-       << "    x = torch.clamp((proprio - self.obs_mean) / self.obs_std, -" << PolicyNetImpl::kObsClip
-       << ", " << PolicyNetImpl::kObsClip << ")\n";
+       << "    x = torch.clamp((proprio - self.obs_mean) / self.obs_std, -"
+       << PolicyNetImpl::kObsClip << ", " << PolicyNetImpl::kObsClip << ")\n";
   if (config.point_features > 0) {
     const std::string e = "encoder_per_point_";
     code << "    p = torch.relu(" << norm(linear("points", e + "0"), e + "1", 64) << ")\n"
          << "    p = torch.relu(" << norm(linear("p", e + "3"), e + "4", 128) << ")\n"
          << "    p = " << norm(linear("p", e + "6"), e + "7", 256) << "\n"
          << "    p = torch.amax(p, 1)\n"
-         << "    p = " << norm(linear("p", "encoder_project_0"), "encoder_project_1", PointEncoderImpl::kOut)
+         << "    p = "
+         << norm(linear("p", "encoder_project_0"), "encoder_project_1", PointEncoderImpl::kOut)
          << "\n"
          << "    x = torch.cat([p, x], 1)\n";
   }

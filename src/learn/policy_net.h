@@ -63,7 +63,7 @@ class PolicyNetImpl : public torch::nn::Module {
   // Log-likelihood of `actions` (discrete: [B] indices; continuous: [B, action_dim]), per row.
   torch::Tensor LogProb(const torch::Tensor& output, const torch::Tensor& actions) const;
   const PolicyConfig& config() const { return config_; }
-  torch::Tensor log_std;  // [action_dim], continuous only
+  torch::Tensor log_std;            // [action_dim], continuous only
   torch::Tensor obs_mean, obs_std;  // [proprio_dim] buffers
   static constexpr double kObsClip = 10.0;
 

@@ -68,9 +68,10 @@ struct CurveRow {
 
 nlohmann::json RowJson(const CurveRow& r) {
   const auto num = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(); };
-  return {r.iteration, r.env_steps, r.seconds, r.rollout_success, num(r.eval_success),
-          r.policy_loss, r.value_loss, num(r.bc_loss), r.entropy, r.approx_kl,
-          r.update_samples_per_s};
+  return {r.iteration,       r.env_steps,           r.seconds,
+          r.rollout_success, num(r.eval_success),   r.policy_loss,
+          r.value_loss,      num(r.bc_loss),        r.entropy,
+          r.approx_kl,       r.update_samples_per_s};
 }
 
 CurveRow RowFromJson(const nlohmann::json& j) {
@@ -120,15 +121,18 @@ void WriteCurve(const std::vector<CurveRow>& rows, const std::filesystem::path& 
     by_steps[1].y.push_back(r.eval_success);
     by_time[1].y.push_back(r.eval_success);
   }
-  core::WriteSvgPlot(svg, {{name + ": success vs env steps", "env steps", "success", {by_steps[0], by_steps[1]}, true},
-                           {name + ": success vs wall-clock", "minutes", "success", {by_time[0], by_time[1]}, true}});
+  core::WriteSvgPlot(
+      svg,
+      {{name + ": success vs env steps", "env steps", "success", {by_steps[0], by_steps[1]}, true},
+       {name + ": success vs wall-clock", "minutes", "success", {by_time[0], by_time[1]}, true}});
 }
 
 // The options that change what training computes (budgets and threads do not).
 nlohmann::json Fingerprint(const PpoOptions& options, const sim::Task& task,
                            const std::filesystem::path& demos) {
   nlohmann::json j = core::ToJson(options);
-  for (const char* k : {"threads", "max_seconds", "max_env_steps", "max_iterations", "target_success"})
+  for (const char* k :
+       {"threads", "max_seconds", "max_env_steps", "max_iterations", "target_success"})
     j.erase(k);
   j["task"] = task.spec().name;
   j["scene"] = task.spec().scene;
@@ -148,8 +152,9 @@ Demos LoadSimDemos(const std::filesystem::path& path, int state_dim, bool discre
     const core::Episode e = reader.Read(name);
     const std::string where = path.string() + ":data/" + name;
     if (e.states.empty())
-      throw core::DatasetError(where + ": no privileged `states` (make the demos with `train "
-                                       "inverse-distill`)");
+      throw core::DatasetError(where +
+                               ": no privileged `states` (make the demos with `train "
+                               "inverse-distill`)");
     if (int(e.states.row_size()) != state_dim)
       throw core::DatasetError(where + "/states: " + std::to_string(e.states.row_size()) +
                                " values per step; this task's state has " +
@@ -314,10 +319,11 @@ PpoReport TrainPpo(std::shared_ptr<const sim::Task> task, const std::filesystem:
     spdlog::info("rl: resuming {} at iteration {} ({} env steps)", report.checkpoint.string(),
                  iteration, env_steps);
   }
-  spdlog::info("rl: task {} level {}, {} envs x {} steps per iteration, {} demo steps for BC, "
-               "{} + {} parameters",
-               spec.name, options.level, N, horizon, report.demo_steps, ParameterCount(*policy),
-               ParameterCount(*value));
+  spdlog::info(
+      "rl: task {} level {}, {} envs x {} steps per iteration, {} demo steps for BC, "
+      "{} + {} parameters",
+      spec.name, options.level, N, horizon, report.demo_steps, ParameterCount(*policy),
+      ParameterCount(*value));
 
   sim::VecEnvOptions vec_options;
   vec_options.num_envs = N;
@@ -422,8 +428,8 @@ PpoReport TrainPpo(std::shared_ptr<const sim::Task> task, const std::filesystem:
       for (int t = horizon - 1; t >= 0; --t)
         for (int i = 0; i < N; ++i) {
           const float keep = 1.0f - d[t * N + i];
-          const float delta = r[t * N + i] +
-                              float(options.gamma) * v[(t + 1) * N + i] * keep - v[t * N + i];
+          const float delta =
+              r[t * N + i] + float(options.gamma) * v[(t + 1) * N + i] * keep - v[t * N + i];
           next[i] = delta + float(options.gamma * options.lambda) * keep * next[i];
           adv[t * N + i] = next[i];
         }
@@ -460,8 +466,8 @@ PpoReport TrainPpo(std::shared_ptr<const sim::Task> task, const std::filesystem:
         const torch::Tensor v = value->forward(flat_obs.index_select(0, idx)).view({-1});
         const torch::Tensor value_loss = (returns.index_select(0, idx) - v).pow(2).mean();
         const torch::Tensor entropy = Entropy(policy, o);
-        torch::Tensor loss = policy_loss + options.value_coef * value_loss -
-                             options.entropy_coef * entropy;
+        torch::Tensor loss =
+            policy_loss + options.value_coef * value_loss - options.entropy_coef * entropy;
         if (use_demos) {
           std::vector<int64_t> pick(options.bc_batch);
           for (auto& k : pick) k = static_cast<int64_t>(demo_rng.Index(demo.states.size(0)));

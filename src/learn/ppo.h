@@ -80,9 +80,9 @@ struct PpoReport {
   int64_t env_steps = 0;
   double seconds = 0;  // wall-clock over every session of the run
   double best_eval_success = 0;
-  int best_iteration = 0;        // whose weights are in `out`
-  int resumed_from = 0;          // iteration of the checkpoint this session started from
-  std::string stopped_by;        // target | seconds | env_steps | iterations
+  int best_iteration = 0;           // whose weights are in `out`
+  int resumed_from = 0;             // iteration of the checkpoint this session started from
+  std::string stopped_by;           // target | seconds | env_steps | iterations
   double update_samples_per_s = 0;  // median over this session's iterations
   int demo_steps = 0;
   std::filesystem::path curve_csv, curve_svg, checkpoint;

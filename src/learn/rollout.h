@@ -18,8 +18,8 @@
 namespace twinforge::learn {
 
 struct PolicyEpisode {
-  int steps = -1;         // control steps to success, -1 on failure
-  core::Episode record;   // when asked for: every step up to success (or the horizon)
+  int steps = -1;        // control steps to success, -1 on failure
+  core::Episode record;  // when asked for: every step up to success (or the horizon)
 };
 
 // Throws Error naming `what` (e.g. the policy file) when the network's inputs or actions do not

@@ -1,0 +1,176 @@
+#include "learn/ppo.h"
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <sstream>
+
+#include "core/error.h"
+#include "core/test_support.h"
+#include "learn/evaluate.h"
+#include "learn/policy_net.h"
+#include "learn/rollout.h"
+#include "learn/test_support.h"
+#include "learn/torch_runtime.h"
+#include "sim/env.h"
+
+namespace twinforge::learn {
+namespace {
+
+std::vector<std::vector<std::string>> ReadCsv(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  std::vector<std::vector<std::string>> rows;
+  for (std::string line; std::getline(in, line);) {
+    rows.emplace_back();
+    std::stringstream s(line);
+    for (std::string cell; std::getline(s, cell, ',');) rows.back().push_back(cell);
+  }
+  return rows;
+}
+
+double MeanColumn(const std::vector<std::vector<std::string>>& rows, std::size_t first,
+                  std::size_t last, int column) {
+  double sum = 0;
+  for (std::size_t i = first; i < last; ++i) sum += std::stod(rows[i][column]);
+  return sum / double(last - first);
+}
+
+PpoOptions SmallOptions() {
+  PpoOptions o;
+  o.num_envs = 16;
+  o.threads = 2;
+  o.eval_every = 5;
+  o.eval_episodes = 30;
+  o.max_seconds = 0;
+  return o;
+}
+
+// From a few percent of sampled episodes to most of them, and the policy file written is the one
+// whose evaluation was best.
+TEST(Ppo, ImprovesSuccessOnATinyTask) {
+  PinMathThreads(1);
+  auto task = testing::ReachTask();
+  const auto dir = core::testing::TestDir("ppo_test", "improves");
+  PpoOptions o = SmallOptions();
+  o.max_iterations = 25;
+  o.target_success = 1.01;  // run the whole budget
+  const PpoReport r = TrainPpo(task, "", dir / "teacher.pt", o, true);
+  EXPECT_EQ(r.iterations, 25);
+  EXPECT_EQ(r.stopped_by, "iterations");
+  const auto rows = ReadCsv(r.curve_csv);
+  ASSERT_EQ(rows.size(), 26u);
+  EXPECT_EQ(rows[0][3], "rollout_success");
+  const double early = MeanColumn(rows, 1, 4, 3), late = MeanColumn(rows, 23, 26, 3);
+  EXPECT_LT(early, 0.25);
+  EXPECT_GT(late, 0.5) << "early " << early;
+  EXPECT_GE(r.best_eval_success, 0.7);
+  EXPECT_GT(r.update_samples_per_s, 0);
+  EXPECT_TRUE(std::filesystem::exists(r.curve_svg));
+
+  PolicyEvalOptions eval;
+  eval.episodes = o.eval_episodes;
+  eval.level = o.level;
+  eval.seed = o.eval_seed;
+  EXPECT_DOUBLE_EQ(EvaluatePolicy(dir / "teacher.pt", task, eval).success_rate(),
+                   r.best_eval_success);
+}
+
+void ExpectSameWeights(const std::filesystem::path& a, const std::filesystem::path& b) {
+  PolicyNet x = LoadPolicy(a), y = LoadPolicy(b);
+  const auto px = x->named_parameters(), py = y->named_parameters();
+  ASSERT_EQ(px.size(), py.size());
+  for (const auto& p : px) EXPECT_TRUE(torch::equal(p.value(), py[p.key()])) << p.key();
+  EXPECT_TRUE(torch::equal(x->obs_mean, y->obs_mean));
+  EXPECT_TRUE(torch::equal(x->obs_std, y->obs_std));
+}
+
+// Sim demos for the BC loss, from an untrained sampled state policy on the tiny task.
+std::filesystem::path TinyDemos(const std::filesystem::path& dir) {
+  auto task = testing::ReachTask();
+  PolicyConfig config;
+  config.point_features = 0;
+  config.proprio_dim = sim::StateDim(*task);
+  torch::manual_seed(3);
+  PolicyNet net(config);
+  SavePolicy(net, dir / "random.pt");
+  InverseDistillOptions o;
+  o.rollout.sample = true;
+  o.rollout.episodes = 400;
+  o.rollout.threads = 2;
+  o.successes = 2;
+  std::filesystem::remove(dir / "sim.hdf5");
+  const InverseDistillReport r = InverseDistill(dir / "random.pt", task, o, dir / "sim.hdf5");
+  EXPECT_EQ(r.successes, 2);
+  return dir / "sim.hdf5";
+}
+
+// Killed after iteration 2 and resumed (on another thread count), a run with a BC loss matches an
+// uninterrupted one step for step: the same curve and the same weights.
+TEST(Ppo, AResumedRunMatchesAnUninterruptedOne) {
+  PinMathThreads(1);
+  auto task = testing::ReachTask();
+  const auto dir = core::testing::TestDir("ppo_test", "resume");
+  const auto demos = TinyDemos(dir);
+  PpoOptions o = SmallOptions();
+  o.num_envs = 8;
+  o.epochs = 3;
+  o.eval_every = 2;
+  o.eval_episodes = 6;
+  o.target_success = 1.01;
+  o.max_iterations = 4;
+  o.threads = 1;
+  const PpoReport whole = TrainPpo(task, demos, dir / "a" / "teacher.pt", o, true);
+  o.max_iterations = 2;
+  o.threads = 2;
+  const PpoReport first = TrainPpo(task, demos, dir / "b" / "teacher.pt", o, true);
+  EXPECT_EQ(first.iterations, 2);
+  o.max_iterations = 4;
+  const PpoReport second = TrainPpo(task, demos, dir / "b" / "teacher.pt", o);
+  EXPECT_EQ(second.resumed_from, 2);
+  EXPECT_EQ(second.iterations, 4);
+  EXPECT_GT(whole.demo_steps, 0);
+
+  const auto a = ReadCsv(whole.curve_csv), b = ReadCsv(second.curve_csv);
+  ASSERT_EQ(a.size(), 5u);
+  ASSERT_EQ(b.size(), 5u);
+  for (std::size_t i = 0; i < a.size(); ++i)
+    for (int c : {0, 1, 3, 4, 5, 6, 7, 8, 9})  // all but wall-clock and throughput
+      EXPECT_EQ(a[i][c], b[i][c]) << "row " << i << " column " << a[0][c];
+  EXPECT_NE(a[4][7], "");  // the BC loss was on
+  ExpectSameWeights(dir / "a" / "teacher.pt", dir / "b" / "teacher.pt");
+}
+
+TEST(Ppo, ACheckpointOfOtherOptionsOrAJunkOneIsRefusedByName) {
+  PinMathThreads(1);
+  auto task = testing::ReachTask();
+  const auto dir = core::testing::TestDir("ppo_test", "refuse");
+  PpoOptions o = SmallOptions();
+  o.num_envs = 4;
+  o.epochs = 1;
+  o.max_iterations = 1;
+  TrainPpo(task, "", dir / "t.pt", o, true);
+  o.seed = 99;
+  o.max_iterations = 2;
+  try {
+    TrainPpo(task, "", dir / "t.pt", o);
+    FAIL() << "resumed a checkpoint made with another seed";
+  } catch (const core::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("t.ckpt"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("--fresh"), std::string::npos) << e.what();
+  }
+  std::ofstream(dir / "t.ckpt") << "junk";
+  EXPECT_THROW(
+      {
+        try {
+          TrainPpo(task, "", dir / "t.pt", o);
+        } catch (const core::Error& e) {
+          EXPECT_NE(std::string(e.what()).find("t.ckpt"), std::string::npos) << e.what();
+          throw;
+        }
+      },
+      core::Error);
+  EXPECT_EQ(TrainPpo(task, "", dir / "t.pt", o, true).iterations, 2);
+}
+
+}  // namespace
+}  // namespace twinforge::learn
