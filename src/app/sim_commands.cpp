@@ -87,6 +87,9 @@ void AddSimCommands(CLI::App& parent, int& exit_code) {
   eval->add_option("--seed", eval_cli->options.seed, "seed");
   eval->add_option("--threads", eval_cli->options.threads, "worker threads")
       ->check(CLI::PositiveNumber);
+  eval->add_flag("--sample", eval_cli->options.sample,
+                 "sample the policy's moves (as PPO trains and evaluates it) instead of taking "
+                 "the most likely one");
   eval->callback([eval_cli, &exit_code] {
     auto task = std::make_shared<const sim::Task>(sim::LoadTaskSpec(eval_cli->task));
     core::Json levels = core::Json::array();
@@ -103,6 +106,7 @@ void AddSimCommands(CLI::App& parent, int& exit_code) {
     }
     std::cout << core::Json{{"policy", eval_cli->policy},
                             {"task", task->spec().name},
+                            {"actions", eval_cli->options.sample ? "sampled" : "greedy"},
                             {"levels", levels}}
                      .dump(2)
               << std::endl;

@@ -7,6 +7,7 @@
 #include "core/error.h"
 #include "core/log.h"
 #include "learn/bc.h"
+#include "learn/bench.h"
 #include "learn/evaluate.h"
 #include "learn/ppo.h"
 #include "learn/rollout.h"
@@ -217,6 +218,15 @@ void AddTrainCommands(CLI::App& parent, int& exit_code) {
   AddInverseDistill(*train, exit_code);
   AddRl(*train, exit_code);
   AddExport(*train, exit_code);
+  auto bench_options = std::make_shared<learn::LearnBenchOptions>();
+  auto* bench = train->add_subcommand(
+      "bench", "PPO update and point-cloud BC throughput vs this machine's matmul peak (JSON)");
+  bench->add_option("--repeats", bench_options->repeats, "runs per measurement (median)")
+      ->check(CLI::PositiveNumber);
+  bench->callback([bench_options, &exit_code] {
+    std::cout << learn::RunLearnBench(*bench_options).dump(2) << "\n";
+    exit_code = 0;
+  });
 }
 
 }  // namespace twinforge::app

@@ -14,6 +14,7 @@
 #include "core/plot.h"
 #include "core/rng.h"
 #include "learn/policy_net.h"
+#include "learn/ppo_update.h"
 #include "learn/rollout.h"
 #include "sim/env.h"
 #include "sim/vec_env.h"
@@ -110,7 +111,7 @@ void WriteCurve(const std::vector<CurveRow>& rows, const std::filesystem::path& 
   std::filesystem::rename(tmp, csv);
   core::PlotSeries by_steps[2], by_time[2];
   by_steps[0].name = by_time[0].name = "training rollouts (sampled)";
-  by_steps[1].name = by_time[1].name = "evaluation (greedy)";
+  by_steps[1].name = by_time[1].name = "evaluation";
   for (const CurveRow& r : rows) {
     for (int k = 0; k < 2; ++k) {
       by_steps[k].x.push_back(double(r.env_steps));
@@ -127,24 +128,37 @@ void WriteCurve(const std::vector<CurveRow>& rows, const std::filesystem::path& 
        {name + ": success vs wall-clock", "minutes", "success", {by_time[0], by_time[1]}, true}});
 }
 
-// The options that change what training computes (budgets and threads do not).
+// The options that change what training computes: budgets, threads and evaluation do not, so a
+// run may be resumed with those changed.
+nlohmann::json Fingerprint(nlohmann::json options) {
+  for (const char* k :
+       {"threads", "max_seconds", "max_env_steps", "max_iterations", "target_success", "eval_every",
+        "eval_episodes", "eval_seed", "eval_sample"})
+    options.erase(k);
+  return options;
+}
+
 nlohmann::json Fingerprint(const PpoOptions& options, const sim::Task& task,
                            const std::filesystem::path& demos) {
-  nlohmann::json j = core::ToJson(options);
-  for (const char* k :
-       {"threads", "max_seconds", "max_env_steps", "max_iterations", "target_success"})
-    j.erase(k);
+  nlohmann::json j = Fingerprint(core::ToJson(options));
   j["task"] = task.spec().name;
   j["scene"] = task.spec().scene;
   j["demos"] = demos.empty() ? "" : std::filesystem::weakly_canonical(demos).string();
   return j;
 }
 
-struct Demos {
-  torch::Tensor states, actions;  // [D, S], [D] long or [D, A]
-};
+// "seed 1 -> 99, demos a -> b": what differs between two fingerprints.
+std::string Differences(const nlohmann::json& before, const nlohmann::json& now) {
+  std::string out;
+  for (const auto& [key, value] : now.items()) {
+    const nlohmann::json old = before.contains(key) ? before[key] : nlohmann::json();
+    if (old != value)
+      out += (out.empty() ? "" : ", ") + key + " " + old.dump() + " -> " + value.dump();
+  }
+  return out.empty() ? "a checkpoint of another kind" : out;
+}
 
-Demos LoadSimDemos(const std::filesystem::path& path, int state_dim, bool discrete) {
+DemoSteps LoadSimDemos(const std::filesystem::path& path, int state_dim, bool discrete) {
   core::DatasetReader reader(path);
   std::vector<float> states, actions;
   int64_t rows = 0, action_dim = 0;
@@ -167,39 +181,18 @@ Demos LoadSimDemos(const std::filesystem::path& path, int state_dim, bool discre
     rows += static_cast<int64_t>(e.length());
   }
   if (rows == 0) throw core::DatasetError(path.string() + ": no demo steps");
-  Demos d;
+  DemoSteps d;
   d.states = torch::from_blob(states.data(), {rows, state_dim}).clone();
   d.actions = torch::from_blob(actions.data(), {rows, action_dim}).clone();
   if (discrete) d.actions = d.actions.view({-1}).to(torch::kLong);
   return d;
 }
 
-torch::nn::Sequential ValueNet(int in, int hidden) {
-  torch::nn::Linear out(hidden, 1);
-  {
-    torch::NoGradGuard no_grad;
-    out->weight.mul_(0.1);
-    out->bias.zero_();
-  }
-  return torch::nn::Sequential(torch::nn::Linear(in, hidden), torch::nn::Tanh(),
-                               torch::nn::Linear(hidden, hidden), torch::nn::Tanh(), out);
-}
-
-torch::Tensor Entropy(const PolicyNet& net, const torch::Tensor& out) {
-  if (net->config().discrete) {
-    const torch::Tensor logp = torch::log_softmax(out, 1);
-    return -(logp.exp() * logp).sum(1).mean();
-  }
-  return (net->log_std + 0.5 * std::log(2 * M_PI * M_E)).sum();
-}
-
-struct Checkpoint {
-  nlohmann::json state;  // fingerprint, counters, curve rows
-};
-
-void SaveCheckpoint(const std::filesystem::path& path, PolicyNet& policy,
-                    torch::nn::Sequential& value, torch::optim::Adam& optimizer,
-                    const RunningNorm& norm, const nlohmann::json& state) {
+void SaveCheckpoint(const std::filesystem::path& path, PpoModel& model, const RunningNorm& norm,
+                    const RunningNorm& return_norm, const nlohmann::json& state) {
+  PolicyNet& policy = model.policy;
+  torch::nn::Sequential& value = model.value;
+  torch::optim::Adam& optimizer = *model.optimizer;
   torch::serialize::OutputArchive archive, p, v, o;
   policy->save(p);
   value->save(v);
@@ -210,15 +203,19 @@ void SaveCheckpoint(const std::filesystem::path& path, PolicyNet& policy,
   archive.write("norm_mean", torch::tensor(norm.mean, torch::kDouble));
   archive.write("norm_var", torch::tensor(norm.var, torch::kDouble));
   archive.write("norm_count", torch::tensor(norm.count, torch::kDouble));
+  archive.write("return_var", torch::tensor(return_norm.var, torch::kDouble));
+  archive.write("return_count", torch::tensor(return_norm.count, torch::kDouble));
   archive.write("twinforge_ppo_state", c10::IValue(state.dump()));
   const auto tmp = path.string() + ".tmp";
   archive.save_to(tmp);
   std::filesystem::rename(tmp, path);
 }
 
-nlohmann::json LoadCheckpoint(const std::filesystem::path& path, PolicyNet& policy,
-                              torch::nn::Sequential& value, torch::optim::Adam& optimizer,
-                              RunningNorm& norm) {
+nlohmann::json LoadCheckpoint(const std::filesystem::path& path, PpoModel& model, RunningNorm& norm,
+                              RunningNorm& return_norm) {
+  PolicyNet& policy = model.policy;
+  torch::nn::Sequential& value = model.value;
+  torch::optim::Adam& optimizer = *model.optimizer;
   try {
     torch::serialize::InputArchive archive, p, v, o;
     archive.load_from(path.string());
@@ -242,6 +239,11 @@ nlohmann::json LoadCheckpoint(const std::filesystem::path& path, PolicyNet& poli
       norm.var[k] = var[k].item<double>();
     }
     norm.count = count.item<double>();
+    torch::Tensor return_var, return_count;
+    archive.read("return_var", return_var);
+    archive.read("return_count", return_count);
+    return_norm.var[0] = return_var[0].item<double>();
+    return_norm.count = return_count.item<double>();
     return nlohmann::json::parse(text.toStringRef());
   } catch (const c10::Error& e) {
     throw core::Error(path.string() + ": unreadable checkpoint (" + e.what_without_backtrace() +
@@ -255,7 +257,72 @@ double Median(std::vector<double> v) {
   return v[v.size() / 2];
 }
 
+torch::nn::Sequential ValueNet(int in, int hidden) {
+  torch::nn::Linear out(hidden, 1);
+  {
+    torch::NoGradGuard no_grad;
+    out->weight.mul_(0.1);
+    out->bias.zero_();
+  }
+  return torch::nn::Sequential(torch::nn::Linear(in, hidden), torch::nn::Tanh(),
+                               torch::nn::Linear(hidden, hidden), torch::nn::Tanh(), out);
+}
+
+torch::Tensor Entropy(const PolicyNet& net, const torch::Tensor& out) {
+  if (net->config().discrete) {
+    const torch::Tensor logp = torch::log_softmax(out, 1);
+    return -(logp.exp() * logp).sum(1).mean();
+  }
+  return (net->log_std + 0.5 * std::log(2 * M_PI * M_E)).sum();
+}
+
 }  // namespace
+
+PpoModel::PpoModel(const PolicyConfig& config, const PpoOptions& options)
+    : policy(config), value(ValueNet(config.proprio_dim, options.hidden)) {
+  params = policy->parameters();
+  for (const auto& p : value->parameters()) params.push_back(p);
+  optimizer = std::make_unique<torch::optim::Adam>(
+      params, torch::optim::AdamOptions(options.learning_rate).eps(1e-5));
+}
+
+MinibatchStats PpoMinibatch(PpoModel& model, const PpoOptions& options, const torch::Tensor& obs,
+                            const torch::Tensor& actions, const torch::Tensor& old_logp,
+                            const torch::Tensor& advantages, const torch::Tensor& returns,
+                            const DemoSteps* demos, core::Rng& demo_rng) {
+  PolicyNet& policy = model.policy;
+  const torch::Tensor o = policy->ForwardNormalized({}, obs);
+  const torch::Tensor logp = policy->LogProb(o, actions);
+  const torch::Tensor adv = (advantages - advantages.mean()) / (advantages.std() + 1e-8);
+  const torch::Tensor ratio = (logp - old_logp).exp();
+  const torch::Tensor policy_loss =
+      -torch::min(ratio * adv, ratio.clamp(1 - options.clip, 1 + options.clip) * adv).mean();
+  const torch::Tensor v = model.value->forward(obs).view({-1});
+  const torch::Tensor value_loss = (returns - v).pow(2).mean();
+  const torch::Tensor entropy = Entropy(policy, o);
+  torch::Tensor loss =
+      policy_loss + options.value_coef * value_loss - options.entropy_coef * entropy;
+  MinibatchStats stats;
+  if (demos) {
+    std::vector<int64_t> pick(options.bc_batch);
+    for (auto& k : pick) k = static_cast<int64_t>(demo_rng.Index(demos->states.size(0)));
+    const torch::Tensor di = torch::from_blob(pick.data(), {options.bc_batch}, torch::kLong);
+    const torch::Tensor d_out = policy->forward({}, demos->states.index_select(0, di));
+    const torch::Tensor bc = -policy->LogProb(d_out, demos->actions.index_select(0, di)).mean();
+    loss = loss + options.bc_coef * bc;
+    stats.bc_loss = bc.item<double>();
+  }
+  model.optimizer->zero_grad();
+  loss.backward();
+  torch::nn::utils::clip_grad_norm_(model.params, options.max_grad_norm);
+  model.optimizer->step();
+  stats.policy_loss = policy_loss.item<double>();
+  stats.value_loss = value_loss.item<double>();
+  stats.entropy = entropy.item<double>();
+  torch::NoGradGuard no_grad;
+  stats.approx_kl = ((ratio - 1) - ratio.log()).mean().item<double>();
+  return stats;
+}
 
 PpoReport TrainPpo(std::shared_ptr<const sim::Task> task, const std::filesystem::path& demos,
                    const std::filesystem::path& out, const PpoOptions& options, bool fresh,
@@ -275,15 +342,17 @@ PpoReport TrainPpo(std::shared_ptr<const sim::Task> task, const std::filesystem:
   config.action_dim = discrete ? sim::kDiscreteActions : sim::kContinuousActionDim;
   config.discrete = discrete;
   config.hidden = options.hidden;
-  PolicyNet policy(config);
-  torch::nn::Sequential value = ValueNet(state_dim, options.hidden);
-  std::vector<torch::Tensor> params = policy->parameters();
-  for (const auto& p : value->parameters()) params.push_back(p);
-  torch::optim::Adam optimizer(params, torch::optim::AdamOptions(options.learning_rate).eps(1e-5));
+  PpoModel model(config, options);
+  PolicyNet& policy = model.policy;
+  torch::nn::Sequential& value = model.value;
   RunningNorm norm(state_dim);
+  // SB3's reward normalization: rewards divided by the running standard deviation of the
+  // discounted return. Unscaled, a success held for 40 steps is a return of ~40, the value loss
+  // (~50) dominates the shared gradient-norm clip and the policy barely moves (KL ~0.003).
+  RunningNorm return_norm(1);
 
   const bool use_demos = !demos.empty() && options.bc_coef > 0;
-  Demos demo;
+  DemoSteps demo;
   if (use_demos) demo = LoadSimDemos(demos, state_dim, discrete);
 
   PpoReport report;
@@ -303,12 +372,12 @@ PpoReport TrainPpo(std::shared_ptr<const sim::Task> task, const std::filesystem:
   report.best_eval_success = -1;
   if (fresh) std::filesystem::remove(report.checkpoint);
   if (std::filesystem::exists(report.checkpoint)) {
-    const nlohmann::json state = LoadCheckpoint(report.checkpoint, policy, value, optimizer, norm);
-    if (state.value("fingerprint", nlohmann::json()) != fingerprint)
+    const nlohmann::json state = LoadCheckpoint(report.checkpoint, model, norm, return_norm);
+    const nlohmann::json stored = Fingerprint(state.value("fingerprint", nlohmann::json::object()));
+    if (stored != fingerprint)
       throw core::Error(report.checkpoint.string() +
                         ": made with another task, demos or options (" +
-                        state.value("fingerprint", nlohmann::json()).dump() + " vs " +
-                        fingerprint.dump() + "); pass --fresh to start over");
+                        Differences(stored, fingerprint) + "); pass --fresh to start over");
     iteration = state["iteration"];
     env_steps = state["env_steps"];
     seconds_before = state["seconds"];
@@ -338,6 +407,7 @@ PpoReport TrainPpo(std::shared_ptr<const sim::Task> task, const std::filesystem:
                                    : torch::empty({horizon, N, config.action_dim});
   torch::Tensor logps = torch::empty({horizon, N}), values = torch::empty({horizon + 1, N});
   torch::Tensor rewards = torch::empty({horizon, N}), dones = torch::empty({horizon, N});
+  torch::Tensor discounted = torch::empty({horizon, N});  // running discounted returns
   std::vector<sim::Action> step_actions(N);
   std::vector<double> update_rates;
 
@@ -346,6 +416,7 @@ PpoReport TrainPpo(std::shared_ptr<const sim::Task> task, const std::filesystem:
   eval_options.level = options.level;
   eval_options.seed = options.eval_seed;
   eval_options.threads = options.threads;
+  eval_options.sample = options.eval_sample;
 
   const auto elapsed = [&] { return seconds_before + SecondsSince(session_start); };
   const auto budget_left = [&]() -> std::string {
@@ -367,6 +438,8 @@ PpoReport TrainPpo(std::shared_ptr<const sim::Task> task, const std::filesystem:
     vec.Reset(core::MixSeed(options.seed, core::MixSeed(iteration, kEnvSeeds)));
     core::Rng action_rng(core::MixSeed(options.seed, iteration), kActions);
     int finished = 0, succeeded = 0;
+    const float reward_scale = float(1.0 / std::sqrt(return_norm.var[0] + 1e-8));
+    std::vector<float> ret(N, 0.0f);
     {
       torch::NoGradGuard no_grad;
       for (int t = 0; t < horizon; ++t) {
@@ -404,9 +477,15 @@ PpoReport TrainPpo(std::shared_ptr<const sim::Task> task, const std::filesystem:
         }
         logps[t].copy_(policy->LogProb(o, actions[t]));
         vec.Step(step_actions.data());
+        float* reward_row = rewards[t].data_ptr<float>();
+        float* done_row = dones[t].data_ptr<float>();
+        float* return_row = discounted[t].data_ptr<float>();
         for (int i = 0; i < N; ++i) {
-          rewards[t][i] = vec.rewards()[i];
-          dones[t][i] = float(vec.dones()[i]);
+          ret[i] = float(options.gamma) * ret[i] + vec.rewards()[i];
+          return_row[i] = ret[i];
+          reward_row[i] = vec.rewards()[i] * reward_scale;
+          done_row[i] = float(vec.dones()[i]);
+          if (vec.dones()[i]) ret[i] = 0;
           if (vec.dones()[i]) {
             ++finished;
             succeeded += vec.episode_success()[i];
@@ -456,41 +535,21 @@ PpoReport TrainPpo(std::shared_ptr<const sim::Task> task, const std::filesystem:
       for (int64_t at = 0; at < samples; at += mb) {
         const int64_t n = std::min(mb, samples - at);
         const torch::Tensor idx = torch::from_blob(order.data() + at, {n}, torch::kLong);
-        const torch::Tensor o = policy->ForwardNormalized({}, flat_obs.index_select(0, idx));
-        const torch::Tensor logp = policy->LogProb(o, flat_actions.index_select(0, idx));
-        torch::Tensor adv = flat_adv.index_select(0, idx);
-        adv = (adv - adv.mean()) / (adv.std() + 1e-8);
-        const torch::Tensor ratio = (logp - flat_logp.index_select(0, idx)).exp();
-        const torch::Tensor policy_loss =
-            -torch::min(ratio * adv, ratio.clamp(1 - options.clip, 1 + options.clip) * adv).mean();
-        const torch::Tensor v = value->forward(flat_obs.index_select(0, idx)).view({-1});
-        const torch::Tensor value_loss = (returns.index_select(0, idx) - v).pow(2).mean();
-        const torch::Tensor entropy = Entropy(policy, o);
-        torch::Tensor loss =
-            policy_loss + options.value_coef * value_loss - options.entropy_coef * entropy;
-        if (use_demos) {
-          std::vector<int64_t> pick(options.bc_batch);
-          for (auto& k : pick) k = static_cast<int64_t>(demo_rng.Index(demo.states.size(0)));
-          const torch::Tensor di = torch::from_blob(pick.data(), {options.bc_batch}, torch::kLong);
-          const torch::Tensor d_out = policy->forward({}, demo.states.index_select(0, di));
-          const torch::Tensor bc = -policy->LogProb(d_out, demo.actions.index_select(0, di)).mean();
-          loss = loss + options.bc_coef * bc;
-          bc_total += bc.item<double>();
-        }
-        optimizer.zero_grad();
-        loss.backward();
-        torch::nn::utils::clip_grad_norm_(params, options.max_grad_norm);
-        optimizer.step();
+        const MinibatchStats m = PpoMinibatch(
+            model, options, flat_obs.index_select(0, idx), flat_actions.index_select(0, idx),
+            flat_logp.index_select(0, idx), flat_adv.index_select(0, idx),
+            returns.index_select(0, idx), use_demos ? &demo : nullptr, demo_rng);
         ++updates;
-        row.policy_loss += policy_loss.item<double>();
-        row.value_loss += value_loss.item<double>();
-        row.entropy += entropy.item<double>();
-        torch::NoGradGuard no_grad;
-        row.approx_kl += ((ratio - 1) - ratio.log()).mean().item<double>();
+        row.policy_loss += m.policy_loss;
+        row.value_loss += m.value_loss;
+        row.entropy += m.entropy;
+        row.approx_kl += m.approx_kl;
+        bc_total += m.bc_loss;
       }
     }
     const double update_seconds = SecondsSince(update_start);
     norm.Update(raw.view({samples, state_dim}));
+    return_norm.Update(discounted.view({samples, 1}));
     row.iteration = iteration;
     row.env_steps = env_steps;
     row.rollout_success = finished ? double(succeeded) / finished : 0.0;
@@ -523,7 +582,7 @@ PpoReport TrainPpo(std::shared_ptr<const sim::Task> task, const std::filesystem:
                             {"best_iteration", report.best_iteration},
                             {"rows", nlohmann::json::array()}};
     for (const CurveRow& r : rows) state["rows"].push_back(RowJson(r));
-    SaveCheckpoint(report.checkpoint, policy, value, optimizer, norm, state);
+    SaveCheckpoint(report.checkpoint, model, norm, return_norm, state);
     std::ostringstream note;
     note.precision(2);
     note << "success " << row.rollout_success;

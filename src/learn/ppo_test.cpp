@@ -71,6 +71,7 @@ TEST(Ppo, ImprovesSuccessOnATinyTask) {
   eval.episodes = o.eval_episodes;
   eval.level = o.level;
   eval.seed = o.eval_seed;
+  eval.sample = o.eval_sample;
   EXPECT_DOUBLE_EQ(EvaluatePolicy(dir / "teacher.pt", task, eval).success_rate(),
                    r.best_eval_success);
 }

@@ -1,0 +1,20 @@
+// How fast learning's math runs on this machine, against the machine's own matmul peak measured
+// in the same process: PPO + BC updates on RialTo's teacher shape and point-cloud BC steps.
+#pragma once
+
+#include <nlohmann/json.hpp>
+
+namespace twinforge::learn {
+
+struct LearnBenchOptions {
+  int repeats = 5;     // runs per measurement; medians are reported
+  int state_dim = 32;  // RialTo's teacher: obs 32 -> [256, 256] -> 14 logits + value head
+  int minibatch = 4096;
+  int cloud_batch = 64;  // DP3-style encoder, 512 points
+};
+
+// JSON: matmul peak (GFLOP/s), PPO update samples/s and GFLOP/s (and as a share of the peak),
+// point-cloud BC clouds/s, with the BLAS in use.
+nlohmann::json RunLearnBench(const LearnBenchOptions& options);
+
+}  // namespace twinforge::learn
