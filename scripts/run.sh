@@ -2,8 +2,9 @@
 # Everything needed on a fresh Debian 12 machine, then the main job on the built-in default.
 # Until the full pipeline lands (issue 9), the main job runs the stages built so far on the
 # open-drawer task: check the machine, measure the scripted expert at each randomization level,
-# benchmark the simulator, write PNG frames of one episode, then scan the proxy-reality drawer
-# world and record 15 teleoperated demos from it, all under runs/demo/.
+# benchmark the simulator, write PNG frames of one episode, scan the proxy-reality drawer world,
+# build its twin, record 15 teleoperated demos, then BC, inverse distillation and the PPO + BC
+# teacher in the twin (about 35 minutes on 2 cores), all under runs/demo/.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
@@ -25,6 +26,8 @@ done
 "$tf" twin build --scan "$out/scan" --scan-after "$out/scan_open" --task open_drawer \
   --out "$out/twin" > "$out/twin_build.json"
 "$tf" sim expert --task "$out/twin/task.yaml" --episodes 100 --level 1 | tee "$out/twin_expert.json"
-"$tf" demos record --reality proxy:open_drawer --task open_drawer --n 15 --out "$out/demos/real.hdf5" \
+"$tf" demos record --reality proxy:open_drawer --task open_drawer --n 15 --out "$out/real.hdf5" \
   | tee "$out/demos.json"
+# BC on the demos, inverse distillation into the twin, the PPO + BC teacher and its evaluation.
+TWINFORGE="$tf" bash scripts/learn_world.sh open_drawer "$out"
 echo "main job done: results in $out/"
