@@ -1,13 +1,13 @@
 #include "learn/bc.h"
 
 #include <algorithm>
-#include <chrono>
 #include <fstream>
 #include <numeric>
 
 #include "core/dataset.h"
 #include "core/error.h"
 #include "core/log.h"
+#include "core/measure.h"
 #include "learn/policy_net.h"
 #include "sim/action.h"
 #include "sim/camera.h"
@@ -157,7 +157,7 @@ Scores Evaluate(PolicyNet& net, const std::vector<Sample>& samples, const PointS
 
 BcReport TrainBc(const std::filesystem::path& demos, const std::filesystem::path& out,
                  const BcOptions& options, core::Progress* progress) {
-  const auto start = std::chrono::steady_clock::now();
+  const auto start = core::Clock::now();
   const Data data = LoadDemos(demos);
   torch::manual_seed(options.seed);
   core::Rng rng(options.seed);
@@ -219,7 +219,7 @@ BcReport TrainBc(const std::filesystem::path& demos, const std::filesystem::path
   }
   report.best_valid_loss = best;
   (data.discrete ? report.valid_accuracy : report.valid_mse) = best_scores.metric;
-  report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  report.seconds = core::SecondsSince(start);
   return report;
 }
 

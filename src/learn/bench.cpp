@@ -1,9 +1,9 @@
 #include "learn/bench.h"
 
 #include <algorithm>
-#include <chrono>
 #include <functional>
 
+#include "core/measure.h"
 #include "core/rng.h"
 #include "learn/policy_net.h"
 #include "learn/ppo_update.h"
@@ -18,12 +18,11 @@ double MedianSeconds(int repeats, const std::function<void()>& work) {
   work();
   std::vector<double> t;
   for (int r = 0; r < repeats; ++r) {
-    const auto start = std::chrono::steady_clock::now();
+    const auto start = core::Clock::now();
     work();
-    t.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+    t.push_back(core::SecondsSince(start));
   }
-  std::nth_element(t.begin(), t.begin() + t.size() / 2, t.end());
-  return t[t.size() / 2];
+  return core::Median(t);
 }
 
 // Multiply-adds of one sample through Linear layers of these widths, times two (FLOPs).

@@ -1,9 +1,8 @@
 #include "learn/evaluate.h"
 
-#include <chrono>
-
 #include "core/error.h"
 #include "core/log.h"
+#include "core/measure.h"
 #include "core/rng.h"
 #include "core/thread_pool.h"
 #include "learn/bc.h"
@@ -15,10 +14,6 @@ namespace twinforge::learn {
 
 namespace {
 
-double SecondsSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
-
 bool Discrete(const sim::Task& task) {
   return task.spec().control.action == sim::ActionMode::kDiscrete;
 }
@@ -28,30 +23,30 @@ sim::Action ChooseAction(const PolicyNet& net, const torch::Tensor& out,
                          const PolicyEvalOptions& options, core::Rng& rng) {
   const PolicyConfig& config = net->config();
   if (config.discrete) {
-    int index = static_cast<int>(out.argmax(1).item<int64_t>());
-    if (options.sample) {
-      const torch::Tensor p = torch::softmax(out[0] / options.temperature, 0);
-      const float* prob = p.data_ptr<float>();
-      double u = rng.Uniform();
-      index = config.action_dim - 1;
-      for (int k = 0; k < config.action_dim; ++k)
-        if ((u -= prob[k]) < 0) {
-          index = k;
-          break;
-        }
-    }
-    return sim::Action::Discrete(index);
+    if (!options.sample)
+      return sim::Action::Discrete(static_cast<int>(out.argmax(1).item<int64_t>()));
+    const torch::Tensor p = torch::softmax(out[0] / options.temperature, 0);
+    return sim::Action::Discrete(SampleIndex(p.data_ptr<float>(), config.action_dim, rng));
   }
-  std::array<double, sim::kContinuousActionDim> v{};
-  const float* mean = out.data_ptr<float>();
-  const float* log_std = net->log_std.data_ptr<float>();
-  for (int k = 0; k < sim::kContinuousActionDim; ++k)
-    v[k] = mean[k] +
-           (options.sample ? std::exp(log_std[k]) * options.temperature * rng.Normal() : 0.0);
-  return sim::Action::Continuous(v);
+  return SampleGaussian(out.data_ptr<float>(), net->log_std.data_ptr<float>(),
+                        options.sample ? options.temperature : 0.0, rng);
 }
 
 }  // namespace
+
+int SampleIndex(const float* probabilities, int n, core::Rng& rng) {
+  double u = rng.Uniform();
+  for (int k = 0; k < n; ++k)
+    if ((u -= probabilities[k]) < 0) return k;
+  return n - 1;
+}
+
+sim::Action SampleGaussian(const float* mean, const float* log_std, double scale, core::Rng& rng) {
+  std::array<double, sim::kContinuousActionDim> v{};
+  for (int k = 0; k < sim::kContinuousActionDim; ++k)
+    v[k] = mean[k] + (scale > 0 ? std::exp(log_std[k]) * scale * rng.Normal() : 0.0);
+  return sim::Action::Continuous(v);
+}
 
 void CheckPolicyFitsTask(const PolicyConfig& config, const sim::Task& task,
                          const std::string& what) {
@@ -172,7 +167,7 @@ std::vector<PolicyEpisode> RunPolicyEpisodes(PolicyNet& net, std::shared_ptr<con
 
 PolicyEvalReport EvaluatePolicy(PolicyNet& net, std::shared_ptr<const sim::Task> task,
                                 const PolicyEvalOptions& options) {
-  const auto start = std::chrono::steady_clock::now();
+  const auto start = core::Clock::now();
   net->eval();
   PolicyEvalReport report;
   report.episodes = options.episodes;
@@ -180,7 +175,7 @@ PolicyEvalReport EvaluatePolicy(PolicyNet& net, std::shared_ptr<const sim::Task>
     report.steps.push_back(e.steps);
     report.successes += e.steps > 0;
   }
-  report.seconds = SecondsSince(start);
+  report.seconds = core::SecondsSince(start);
   return report;
 }
 
@@ -196,7 +191,7 @@ InverseDistillReport InverseDistill(const std::filesystem::path& policy,
                                     std::shared_ptr<const sim::Task> task,
                                     const InverseDistillOptions& options,
                                     const std::filesystem::path& out, core::Progress* progress) {
-  const auto start = std::chrono::steady_clock::now();
+  const auto start = core::Clock::now();
   if (options.successes <= 0 || options.round <= 0 || options.rollout.episodes <= 0)
     throw core::ConfigError("train inverse-distill", "n",
                             "positive numbers of demos, attempts and episodes per round");
@@ -228,7 +223,7 @@ InverseDistillReport InverseDistill(const std::filesystem::path& policy,
     }
     if (progress) progress->Set(report.successes, std::to_string(report.attempts) + " attempts");
   }
-  report.seconds = SecondsSince(start);
+  report.seconds = core::SecondsSince(start);
   spdlog::info("inverse distillation: {} of {} episodes succeeded ({:.0f}%), {} kept in {}",
                report.successes, report.attempts, 100 * report.success_rate(), report.successes,
                out.string());

@@ -1,7 +1,6 @@
 #include "learn/ppo.h"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <fstream>
 #include <numeric>
@@ -11,6 +10,7 @@
 #include "core/dataset.h"
 #include "core/error.h"
 #include "core/log.h"
+#include "core/measure.h"
 #include "core/plot.h"
 #include "core/rng.h"
 #include "learn/policy_net.h"
@@ -23,11 +23,8 @@ namespace twinforge::learn {
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-
-double SecondsSince(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
+using core::Clock;
+using core::SecondsSince;
 
 // Streams of the per-iteration generators.
 enum Stream : uint64_t { kEnvSeeds = 1, kActions = 2, kShuffle = 3, kDemoBatches = 4 };
@@ -251,12 +248,6 @@ nlohmann::json LoadCheckpoint(const std::filesystem::path& path, PpoModel& model
   }
 }
 
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-  return v[v.size() / 2];
-}
-
 torch::nn::Sequential ValueNet(int in, int hidden) {
   torch::nn::Linear out(hidden, 1);
   {
@@ -453,26 +444,17 @@ PpoReport TrainPpo(std::shared_ptr<const sim::Task> task, const std::filesystem:
           const float* p = prob.data_ptr<float>();
           int64_t* a = actions[t].data_ptr<int64_t>();
           for (int i = 0; i < N; ++i) {
-            double u = action_rng.Uniform();
-            int k = config.action_dim - 1;
-            for (int j = 0; j < config.action_dim; ++j)
-              if ((u -= p[i * config.action_dim + j]) < 0) {
-                k = j;
-                break;
-              }
-            a[i] = k;
-            step_actions[i] = sim::Action::Discrete(k);
+            a[i] = SampleIndex(p + i * config.action_dim, config.action_dim, action_rng);
+            step_actions[i] = sim::Action::Discrete(static_cast<int>(a[i]));
           }
         } else {
-          const torch::Tensor std = policy->log_std.exp();
-          torch::Tensor a = actions[t];
+          const torch::Tensor mean = o.contiguous();
+          float* a = actions[t].data_ptr<float>();
           for (int i = 0; i < N; ++i) {
-            std::array<double, sim::kContinuousActionDim> v{};
-            for (int k = 0; k < config.action_dim; ++k) {
-              v[k] = o[i][k].item<double>() + std[k].item<double>() * action_rng.Normal();
-              a[i][k] = v[k];
-            }
-            step_actions[i] = sim::Action::Continuous(v);
+            step_actions[i] = SampleGaussian(mean.data_ptr<float>() + i * config.action_dim,
+                                             policy->log_std.data_ptr<float>(), 1.0, action_rng);
+            for (int k = 0; k < config.action_dim; ++k)
+              a[i * config.action_dim + k] = float(step_actions[i].value[k]);
           }
         }
         logps[t].copy_(policy->LogProb(o, actions[t]));
@@ -598,7 +580,7 @@ PpoReport TrainPpo(std::shared_ptr<const sim::Task> task, const std::filesystem:
   report.iterations = iteration;
   report.env_steps = env_steps;
   report.seconds = elapsed();
-  report.update_samples_per_s = Median(update_rates);
+  report.update_samples_per_s = core::Median(update_rates);
   if (report.best_iteration == 0) {  // no evaluation ran: keep the last weights
     SavePolicy(policy, out);
     report.best_iteration = iteration;

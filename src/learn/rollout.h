@@ -11,8 +11,10 @@
 #include <vector>
 
 #include "core/dataset.h"
+#include "core/rng.h"
 #include "learn/evaluate.h"
 #include "learn/policy_net.h"
+#include "sim/action.h"
 #include "sim/task.h"
 
 namespace twinforge::learn {
@@ -21,6 +23,12 @@ struct PolicyEpisode {
   int steps = -1;        // control steps to success, -1 on failure
   core::Episode record;  // when asked for: every step up to success (or the horizon)
 };
+
+// A move drawn from `probabilities` (n of them, summing to 1): one uniform draw, the cumulative
+// distribution inverted. PPO's rollouts and sampled evaluation both draw this way.
+int SampleIndex(const float* probabilities, int n, core::Rng& rng);
+// The continuous action mean + scale * exp(log_std) * N(0, 1), per component (scale 0: the mean).
+sim::Action SampleGaussian(const float* mean, const float* log_std, double scale, core::Rng& rng);
 
 // Throws Error naming `what` (e.g. the policy file) when the network's inputs or actions do not
 // fit the task.

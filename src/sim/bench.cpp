@@ -5,6 +5,7 @@
 #include <functional>
 #include <thread>
 
+#include "core/measure.h"
 #include "sim/camera.h"
 #include "sim/vec_env.h"
 
@@ -12,16 +13,11 @@ namespace twinforge::sim {
 
 namespace {
 
-double Median(std::vector<double> values) {
-  std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
-  return values[values.size() / 2];
-}
-
 // work()/seconds for one run, where work() returns the units it did.
 double Rate(const std::function<double()>& work) {
-  const auto start = std::chrono::steady_clock::now();
+  const auto start = core::Clock::now();
   const double units = work();
-  return units / std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return units / core::SecondsSince(start);
 }
 
 }  // namespace
@@ -148,18 +144,18 @@ nlohmann::json RunSimBench(std::shared_ptr<const Task> task, const BenchOptions&
   return {{"task", task->spec().name},
           {"repeats", options.repeats},
           {"num_envs", options.num_envs},
-          {"raw_mj_step_per_s", Median(raw)},
-          {"vecenv_physics_steps_per_s_1_thread", Median(v1)},
-          {"vecenv_physics_steps_per_s_2_threads", Median(v2)},
-          {"vecenv_overhead_vs_raw", Median(overhead)},
-          {"thread_scaling_2_vs_1", Median(scaling)},
-          {"raw_mj_step_thread_scaling_2_vs_1", Median(raw_scaling)},
-          {"thread_scaling_vs_raw_ceiling", Median(scaling) / Median(raw_scaling)},
-          {"raw_mj_ray_per_s", Median(rays)},
-          {"raw_embree_ray_per_s", Median(embree_rays)},
+          {"raw_mj_step_per_s", core::Median(raw)},
+          {"vecenv_physics_steps_per_s_1_thread", core::Median(v1)},
+          {"vecenv_physics_steps_per_s_2_threads", core::Median(v2)},
+          {"vecenv_overhead_vs_raw", core::Median(overhead)},
+          {"thread_scaling_2_vs_1", core::Median(scaling)},
+          {"raw_mj_step_thread_scaling_2_vs_1", core::Median(raw_scaling)},
+          {"thread_scaling_vs_raw_ceiling", core::Median(scaling) / core::Median(raw_scaling)},
+          {"raw_mj_ray_per_s", core::Median(rays)},
+          {"raw_embree_ray_per_s", core::Median(embree_rays)},
           {"camera", {{"width", k.width}, {"height", k.height}}},
-          {"rendered_clouds_per_s_1_core", Median(clouds)},
-          {"rendered_cloud_time_vs_raw_embree_rays", Median(cloud_ratio)}};
+          {"rendered_clouds_per_s_1_core", core::Median(clouds)},
+          {"rendered_cloud_time_vs_raw_embree_rays", core::Median(cloud_ratio)}};
 }
 
 }  // namespace twinforge::sim
