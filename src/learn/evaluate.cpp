@@ -18,7 +18,8 @@ bool Discrete(const sim::Task& task) {
   return task.spec().control.action == sim::ActionMode::kDiscrete;
 }
 
-// The action a policy output [1, action_dim] asks for.
+}  // namespace
+
 sim::Action ChooseAction(const PolicyNet& net, const torch::Tensor& out,
                          const PolicyEvalOptions& options, core::Rng& rng) {
   const PolicyConfig& config = net->config();
@@ -31,8 +32,6 @@ sim::Action ChooseAction(const PolicyNet& net, const torch::Tensor& out,
   return SampleGaussian(out.data_ptr<float>(), net->log_std.data_ptr<float>(),
                         options.sample ? options.temperature : 0.0, rng);
 }
-
-}  // namespace
 
 int SampleIndex(const float* probabilities, int n, core::Rng& rng) {
   double u = rng.Uniform();

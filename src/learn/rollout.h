@@ -12,6 +12,7 @@
 
 #include "core/dataset.h"
 #include "core/rng.h"
+#include "learn/distill.h"
 #include "learn/evaluate.h"
 #include "learn/policy_net.h"
 #include "sim/action.h"
@@ -30,6 +31,11 @@ int SampleIndex(const float* probabilities, int n, core::Rng& rng);
 // The continuous action mean + scale * exp(log_std) * N(0, 1), per component (scale 0: the mean).
 sim::Action SampleGaussian(const float* mean, const float* log_std, double scale, core::Rng& rng);
 
+// The action a policy output [1, action_dim] asks for: the most likely move (the mean) or, with
+// options.sample, one drawn at options.temperature.
+sim::Action ChooseAction(const PolicyNet& net, const torch::Tensor& out,
+                         const PolicyEvalOptions& options, core::Rng& rng);
+
 // Throws Error naming `what` (e.g. the policy file) when the network's inputs or actions do not
 // fit the task.
 void CheckPolicyFitsTask(const PolicyConfig& config, const sim::Task& task,
@@ -46,5 +52,29 @@ std::vector<PolicyEpisode> RunPolicyEpisodes(PolicyNet& net, std::shared_ptr<con
 // Success rate of an in-memory policy over options.episodes.
 PolicyEvalReport EvaluatePolicy(PolicyNet& net, std::shared_ptr<const sim::Task> task,
                                 const PolicyEvalOptions& options);
+
+// Episodes for teacher-student distillation: `actor` acts (the teacher; the student in DAgger)
+// and the teacher labels every step with its move probabilities (or its mean). Each step keeps
+// the clouds (ray-cast with depth noise when `rendered`, else sampled on the surfaces), the
+// proprioception, the privileged state, the action taken and the label. Episode i is reset with
+// MixSeed(seed, i) at `level`; failed episodes are dropped unless `keep_failures`, successful
+// ones end at their first success. The outcome does not depend on the thread count.
+struct DistillRollout {
+  int level = 1;
+  bool rendered = true;
+  bool keep_failures = false;
+  bool sample = true;  // the actor samples its moves (else the most likely / the mean)
+  int scene_points = 1024, arm_points = 256;
+  int student_points = 512;  // points the student acting in DAgger sees
+  uint64_t seed = 0;
+  int threads = 1;
+};
+struct DistillCollection {
+  DistillSource data;
+  int episodes = 0, successes = 0, kept = 0;
+};
+DistillCollection CollectDistill(PolicyNet& teacher, PolicyNet* actor,
+                                 std::shared_ptr<const sim::Task> task,
+                                 const DistillRollout& options, int64_t first, int64_t count);
 
 }  // namespace twinforge::learn

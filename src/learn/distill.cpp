@@ -1,0 +1,372 @@
+#include "learn/distill.h"
+
+#include <fstream>
+
+#include "core/dataset.h"
+#include "core/error.h"
+#include "core/log.h"
+#include "core/measure.h"
+#include "core/thread_pool.h"
+#include "learn/policy_net.h"
+#include "learn/rollout.h"
+#include "sim/camera.h"
+#include "sim/env.h"
+
+namespace twinforge::learn {
+
+void DistillSource::Append(const DistillSource& other) {
+  if (other.size() == 0) return;
+  if (size() == 0) {
+    const std::string keep = name;
+    *this = other;
+    if (!keep.empty()) name = keep;
+    return;
+  }
+  if (other.scene_n != scene_n || other.arm_n != arm_n || other.proprio_dim != proprio_dim ||
+      other.target_dim != target_dim)
+    throw core::Error("distill: cannot add '" + other.name + "' to '" + name +
+                      "': their steps differ in shape");
+  const auto add = [](std::vector<float>& to, const std::vector<float>& from) {
+    to.insert(to.end(), from.begin(), from.end());
+  };
+  add(scene, other.scene);
+  add(arm, other.arm);
+  add(proprio, other.proprio);
+  add(state, other.state);
+  add(target, other.target);
+  add(action, other.action);
+}
+
+std::vector<std::pair<int, std::size_t>> PlanBatch(const std::vector<const DistillSource*>& sources,
+                                                   int batch, core::Rng& rng) {
+  std::vector<int> filled;
+  for (int s = 0; s < int(sources.size()); ++s)
+    if (sources[s]->size() > 0) filled.push_back(s);
+  if (filled.empty()) throw core::Error("distill: no data to train on");
+  std::vector<std::pair<int, std::size_t>> rows;
+  rows.reserve(batch);
+  const int k = static_cast<int>(filled.size());
+  for (int i = 0; i < k; ++i) {
+    const int share = batch / k + (i < batch % k ? 1 : 0);
+    const DistillSource& source = *sources[filled[i]];
+    for (int r = 0; r < share; ++r)
+      rows.emplace_back(filled[i], static_cast<std::size_t>(rng.Index(source.size())));
+  }
+  return rows;
+}
+
+DistillSource LoadDemoSource(const std::filesystem::path& demos) {
+  core::DatasetReader reader(demos);
+  const bool discrete = reader.env_args().value("action_mode", "discrete") == "discrete";
+  DistillSource source;
+  source.name = "real";
+  for (const std::string& name : reader.demos()) {
+    const core::Episode e = reader.Read(name);
+    const std::string where = demos.string() + ":data/" + name;
+    for (const char* key : {"proprio", "scene_points", "arm_points"})
+      if (!e.obs.count(key)) throw core::DatasetError(where + ": no obs/" + key);
+    const auto& proprio = e.obs.at("proprio");
+    const auto& scene = e.obs.at("scene_points");
+    const auto& arm = e.obs.at("arm_points");
+    DistillSource d;
+    d.name = "real";
+    d.scene_n = int(scene.row_size() / 3);
+    d.arm_n = int(arm.row_size() / 3);
+    d.proprio_dim = int(proprio.row_size());
+    d.action_dim = int(e.actions.row_size());
+    d.target_dim = discrete ? sim::kDiscreteActions : d.action_dim;
+    d.scene = scene.data;
+    d.arm = arm.data;
+    d.proprio = proprio.data;
+    d.action = e.actions.data;
+    for (std::size_t t = 0; t < e.length(); ++t) {
+      std::vector<float> target(d.target_dim, 0.f);
+      if (discrete) {
+        const float a = e.actions.row(t)[0];
+        if (!(a >= 0 && a < sim::kDiscreteActions) || a != std::floor(a))
+          throw core::DatasetError(where + "/actions row " + std::to_string(t) +
+                                   ": not a move index 0.." +
+                                   std::to_string(sim::kDiscreteActions - 1));
+        target[int(a)] = 1.f;
+      } else {
+        std::copy_n(e.actions.row(t), d.target_dim, target.begin());
+      }
+      d.target.insert(d.target.end(), target.begin(), target.end());
+    }
+    source.Append(d);
+  }
+  if (source.size() == 0) throw core::DatasetError(demos.string() + ": no demo steps");
+  return source;
+}
+
+DistillCollection CollectDistill(PolicyNet& teacher, PolicyNet* actor,
+                                 std::shared_ptr<const sim::Task> task,
+                                 const DistillRollout& options, int64_t first, int64_t count) {
+  const PolicyConfig& tc = teacher->config();
+  const bool discrete = tc.discrete;
+  const int target_dim = tc.action_dim;
+  const bool student_acts = actor != nullptr;
+  struct Kept {
+    DistillSource data;
+    bool success = false, kept = false;
+  };
+  std::vector<Kept> episodes(count);
+  core::ThreadPool pool(options.threads);
+  const int blocks = static_cast<int>(std::min<int64_t>(pool.size(), std::max<int64_t>(count, 1)));
+  pool.ParallelFor(blocks, [&](int64_t block) {
+    torch::NoGradGuard no_grad;
+    sim::Env env(task, static_cast<int>(block));
+    const int state_dim = env.state_dim();
+    sim::CloudMaker::Options cloud_options;
+    cloud_options.scene_points = options.scene_points;
+    cloud_options.arm_points = options.arm_points;
+    cloud_options.rendered = options.rendered;
+    sim::CloudMaker clouds(*task, env.model(), cloud_options);
+    std::vector<float> scene(3 * options.scene_points), arm(3 * options.arm_points);
+    std::vector<float> state(state_dim), proprio(sim::kProprioDim);
+    PointSampling sampling;
+    sampling.n = options.student_points;
+    torch::Tensor points = torch::empty({1, sampling.n, 4});
+    torch::Tensor state_in = torch::empty({1, state_dim});
+    torch::Tensor proprio_in = torch::empty({1, sim::kProprioDim});
+    PolicyEvalOptions choose;
+    choose.sample = options.sample;
+    const int horizon = task->spec().horizon;
+    for (int64_t j = count * block / blocks; j < count * (block + 1) / blocks; ++j) {
+      const uint64_t seed = core::MixSeed(options.seed, static_cast<uint64_t>(first + j));
+      env.Reset(seed, options.level);
+      core::Rng cloud_rng(seed, 0xc1), sample_rng(seed, 0x5a), action_rng(seed, 0xac);
+      DistillSource& d = episodes[j].data;
+      d.scene_n = options.scene_points;
+      d.arm_n = options.arm_points;
+      d.proprio_dim = sim::kProprioDim;
+      d.state_dim = state_dim;
+      d.target_dim = target_dim;
+      d.action_dim = discrete ? 1 : target_dim;
+      for (int t = 0; t < horizon; ++t) {
+        env.State(state.data());
+        env.Proprio(proprio.data());
+        clouds.Make(env.model(), env.data(), env.base(), cloud_rng, scene.data(), arm.data());
+        std::copy(state.begin(), state.end(), state_in.data_ptr<float>());
+        const torch::Tensor label = teacher->forward(torch::Tensor(), state_in);
+        torch::Tensor acted = label;
+        if (student_acts) {
+          SamplePoints(scene.data(), options.scene_points, arm.data(), options.arm_points, sampling,
+                       false, sample_rng, points.data_ptr<float>());
+          std::copy(proprio.begin(), proprio.end(), proprio_in.data_ptr<float>());
+          acted = (*actor)->forward(points, proprio_in);
+        }
+        const sim::Action action =
+            ChooseAction(student_acts ? *actor : teacher, acted, choose, action_rng);
+        d.scene.insert(d.scene.end(), scene.begin(), scene.end());
+        d.arm.insert(d.arm.end(), arm.begin(), arm.end());
+        d.proprio.insert(d.proprio.end(), proprio.begin(), proprio.end());
+        d.state.insert(d.state.end(), state.begin(), state.end());
+        const torch::Tensor t_out = discrete ? torch::softmax(label[0], 0) : label[0];
+        d.target.insert(d.target.end(), t_out.data_ptr<float>(),
+                        t_out.data_ptr<float>() + target_dim);
+        if (discrete)
+          d.action.push_back(float(action.index));
+        else
+          for (int k = 0; k < target_dim; ++k) d.action.push_back(float(action.value[k]));
+        const sim::StepResult r = env.Step(action);
+        if (r.success) {
+          episodes[j].success = true;
+          break;
+        }
+        if (r.done) break;
+      }
+      episodes[j].kept = episodes[j].success || options.keep_failures;
+      if (!episodes[j].kept) d = DistillSource();
+    }
+  });
+  DistillCollection out;
+  out.episodes = static_cast<int>(count);
+  for (Kept& e : episodes) {
+    out.successes += e.success;
+    if (!e.kept) continue;
+    ++out.kept;
+    out.data.Append(e.data);
+  }
+  return out;
+}
+
+namespace {
+
+// Loss of the student's outputs against `targets`: cross-entropy with the teacher's move
+// probabilities, or the Gaussian negative log-likelihood of the teacher's mean.
+torch::Tensor DistillLoss(PolicyNet& net, const torch::Tensor& out, const torch::Tensor& targets) {
+  if (net->config().discrete) return -(targets * torch::log_softmax(out, 1)).sum(1).mean();
+  return -net->LogProb(out, targets).mean();
+}
+
+struct Batch {
+  torch::Tensor points, proprio, targets;
+};
+
+Batch MakeBatch(const std::vector<const DistillSource*>& sources,
+                const std::vector<std::pair<int, std::size_t>>& rows, const PointSampling& sampling,
+                int proprio_dim, int target_dim, core::Rng& rng) {
+  const auto B = static_cast<int64_t>(rows.size());
+  Batch b{torch::empty({B, sampling.n, 4}), torch::empty({B, proprio_dim}),
+          torch::empty({B, target_dim})};
+  for (int64_t i = 0; i < B; ++i) {
+    const DistillSource& s = *sources[rows[i].first];
+    const std::size_t t = rows[i].second;
+    SamplePoints(s.scene.data() + 3 * s.scene_n * t, s.scene_n, s.arm.data() + 3 * s.arm_n * t,
+                 s.arm_n, sampling, true, rng, b.points[i].data_ptr<float>());
+    std::copy_n(s.proprio.data() + proprio_dim * t, proprio_dim, b.proprio[i].data_ptr<float>());
+    std::copy_n(s.target.data() + target_dim * t, target_dim, b.targets[i].data_ptr<float>());
+  }
+  return b;
+}
+
+}  // namespace
+
+DistillReport TrainDistill(const std::filesystem::path& teacher_path,
+                           std::shared_ptr<const sim::Task> task, const std::filesystem::path& real,
+                           const std::filesystem::path& out, const DistillOptions& options,
+                           core::Progress* progress) {
+  const auto start = core::Clock::now();
+  PolicyNet teacher = LoadPolicy(teacher_path);
+  if (teacher->config().point_features != 0)
+    throw core::Error(teacher_path.string() +
+                      ": a point-cloud policy; distillation needs a state teacher (`train rl`)");
+  CheckPolicyFitsTask(teacher->config(), *task, teacher_path.string());
+  teacher->eval();
+
+  torch::manual_seed(options.seed);
+  core::Rng rng(options.seed, 0xd157);
+  PolicyConfig config;
+  config.points = options.sampling.n;
+  config.proprio_dim = sim::kProprioDim;
+  config.action_dim = teacher->config().action_dim;
+  config.discrete = teacher->config().discrete;
+  config.hidden = options.hidden;
+  PolicyNet student(config);
+  CheckPolicyFitsTask(config, *task, "the student");
+  torch::optim::AdamW optimizer(student->parameters(),
+                                torch::optim::AdamWOptions(options.learning_rate));
+
+  // Sources: the real demos first (when co-training), then one per stage as it runs.
+  std::vector<DistillSource> sources;
+  sources.reserve(5);
+  DistillReport report;
+  if (!real.empty()) {
+    sources.push_back(LoadDemoSource(real));
+    const DistillSource& r = sources.back();
+    if (r.proprio_dim != sim::kProprioDim || r.target_dim != config.action_dim)
+      throw core::DatasetError(real.string() + ": demos of " + std::to_string(r.target_dim) +
+                               " actions from " + std::to_string(r.proprio_dim) +
+                               "-d proprioception; the teacher has " +
+                               std::to_string(config.action_dim));
+    report.real_steps = static_cast<long>(r.size());
+  }
+
+  report.curve = out;
+  report.curve.replace_extension(".curve.csv");
+  if (report.curve.has_parent_path())
+    std::filesystem::create_directories(report.curve.parent_path());
+  std::ofstream curve(report.curve);
+  if (!curve) throw core::IoError("cannot write " + report.curve.string());
+  curve << "stage,episodes,successes,kept,steps,loss,student_success,seconds\n";
+
+  struct Stage {
+    std::string name;
+    int episodes, level;
+    bool rendered, dagger;
+  };
+  std::vector<Stage> stages = {
+      {"synthetic", options.synthetic_episodes, options.level, false, false},
+      {"rendered", options.rendered_episodes, options.level, true, false},
+      {"distractors", options.distractor_episodes, std::max(options.level, 2), true, false}};
+  for (int r = 0; r < options.dagger_rounds; ++r)
+    stages.push_back(
+        {"dagger" + std::to_string(r + 1), options.dagger_episodes, options.level, true, true});
+
+  double best = -1;
+  bool saved = false;
+  for (std::size_t k = 0; k < stages.size(); ++k) {
+    const Stage& stage = stages[k];
+    if (stage.episodes == 0) continue;
+    const auto stage_start = core::Clock::now();
+    DistillRollout rollout;
+    rollout.level = stage.level;
+    rollout.rendered = stage.rendered;
+    rollout.keep_failures = stage.dagger;
+    rollout.sample = stage.dagger ? options.student_sample : options.teacher_sample;
+    rollout.scene_points = options.scene_points;
+    rollout.arm_points = options.arm_points;
+    rollout.student_points = options.sampling.n;
+    rollout.seed = core::MixSeed(options.seed, 0x5747 + k);
+    rollout.threads = options.threads;
+    student->eval();
+    DistillCollection got = CollectDistill(teacher, stage.dagger ? &student : nullptr, task,
+                                           rollout, 0, stage.episodes);
+    student->train();
+    DistillStageReport sr;
+    sr.name = stage.name;
+    sr.episodes = got.episodes;
+    sr.successes = got.successes;
+    sr.kept = got.kept;
+    sr.steps = static_cast<long>(got.data.size());
+    got.data.name = stage.dagger ? "dagger" : stage.name;
+    // DAgger rounds share one source: their data are one kind, relabelled student states.
+    if (stage.dagger && !sources.empty() && sources.back().name == "dagger")
+      sources.back().Append(got.data);
+    else
+      sources.push_back(std::move(got.data));
+    spdlog::info("distill: {}: {} of {} episodes succeeded ({} acting), {} steps kept", stage.name,
+                 sr.successes, sr.episodes, stage.dagger ? "student" : "teacher", sr.steps);
+
+    std::vector<const DistillSource*> from;
+    for (const DistillSource& s : sources) from.push_back(&s);
+    double recent = 0;
+    int recent_n = 0;
+    for (int step = 0; step < options.train_steps; ++step) {
+      const Batch b = MakeBatch(from, PlanBatch(from, options.batch, rng), options.sampling,
+                                config.proprio_dim, config.action_dim, rng);
+      const torch::Tensor loss =
+          DistillLoss(student, student->forward(b.points, b.proprio), b.targets);
+      optimizer.zero_grad();
+      loss.backward();
+      torch::nn::utils::clip_grad_norm_(student->parameters(), options.grad_clip);
+      optimizer.step();
+      if (step >= options.train_steps - 100) {
+        recent += loss.item<double>();
+        ++recent_n;
+      }
+    }
+    sr.loss = recent / std::max(1, recent_n);
+    if (options.eval_episodes > 0) {
+      PolicyEvalOptions eval;
+      eval.episodes = options.eval_episodes;
+      eval.level = options.level;
+      eval.seed = options.eval_seed;
+      eval.threads = options.threads;
+      eval.sample = options.student_sample;
+      sr.student = EvaluatePolicy(student, task, eval).success_rate();
+      student->train();
+      if (sr.student > best) {
+        best = sr.student;
+        SavePolicy(student, out);
+        saved = true;
+      }
+    }
+    sr.seconds = core::SecondsSince(stage_start);
+    curve << sr.name << "," << sr.episodes << "," << sr.successes << "," << sr.kept << ","
+          << sr.steps << "," << sr.loss << "," << sr.student << "," << sr.seconds << "\n"
+          << std::flush;
+    spdlog::info("distill: {}: loss {:.3f}, student success in the twin {}", stage.name, sr.loss,
+                 sr.student < 0 ? std::string("(not evaluated)")
+                                : std::to_string(int(std::lround(100 * sr.student))) + "%");
+    report.stages.push_back(sr);
+    if (progress) progress->Advance(1, stage.name);
+  }
+  if (report.stages.empty()) throw core::ConfigError("train distill", "episodes", "no stage ran");
+  if (!saved) SavePolicy(student, out);
+  report.seconds = core::SecondsSince(start);
+  return report;
+}
+
+}  // namespace twinforge::learn

@@ -1,0 +1,132 @@
+// RialTo's teacher-student distillation: the state teacher (PPO + BC, `train rl`) taught to a
+// point-cloud student that sees only what the robot's camera sees.
+//
+// Four stages, each adding one data source; after each, the student trains on every source so far:
+//   1 synthetic    teacher rollouts; clouds sampled on the twin's surfaces at their current
+//                  poses (cheap, no occlusion)
+//   2 rendered     teacher rollouts; depth ray-cast from the task camera (placed where the real
+//                  one is) with the depth-noise model
+//   3 distractors  as 2, at randomization level 2 (distractor objects in the scene)
+//   4 dagger       rounds in which the student acts and the teacher labels every state visited
+// Teacher rollouts are success-filtered (kept up to their first success); DAgger keeps every
+// step, failures included, since the teacher's label is right wherever the student went.
+// Arm points always come from forward kinematics. With real demos (co-training) they are one more
+// source, and every batch holds an equal share of each source.
+//
+// Targets: the teacher's move probabilities (a real demo's move is one-hot) with cross-entropy,
+// or for continuous actions the teacher's mean (a real demo's action) with the Gaussian
+// log-likelihood.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "core/progress.h"
+#include "core/rng.h"
+#include "learn/bc.h"
+#include "sim/task.h"
+
+namespace twinforge::learn {
+
+struct DistillOptions {
+  int synthetic_episodes = 200;   // stage 1: teacher rollouts (before the success filter)
+  int rendered_episodes = 100;    // stage 2
+  int distractor_episodes = 100;  // stage 3
+  int dagger_rounds = 3;          // stage 4
+  int dagger_episodes = 60;       // per round
+  int train_steps = 600;          // gradient steps after each stage and each DAgger round
+  int level = 1;                  // of stages 1, 2 and 4; stage 3 runs at max(level, 2)
+  // The teacher acts as it was trained and evaluated, sampling its moves; the student samples
+  // too (in DAgger and in the evaluation after each stage).
+  bool teacher_sample = true;
+  bool student_sample = true;
+  int batch = 64;
+  double learning_rate = 3e-4;  // AdamW, gradient norm clipped to 5 (RialTo's)
+  double grad_clip = 5.0;
+  PointSampling sampling;  // the student's points and their augmentation
+  int hidden = 256;
+  int scene_points = 1024, arm_points = 256;  // kept per step of the sim sources
+  int eval_episodes = 50;                     // the student in the twin after each stage; 0: none
+  uint64_t eval_seed = 9000;
+  int threads = 2;
+  uint64_t seed = 1;
+  template <class A>
+  void Serialize(A& a) {
+    a("synthetic_episodes", synthetic_episodes);
+    a("rendered_episodes", rendered_episodes);
+    a("distractor_episodes", distractor_episodes);
+    a("dagger_rounds", dagger_rounds);
+    a("dagger_episodes", dagger_episodes);
+    a("train_steps", train_steps);
+    a("level", level);
+    a("teacher_sample", teacher_sample);
+    a("student_sample", student_sample);
+    a("batch", batch);
+    a("learning_rate", learning_rate);
+    a("grad_clip", grad_clip);
+    a("hidden", hidden);
+    a("scene_points", scene_points);
+    a("arm_points", arm_points);
+    a("eval_episodes", eval_episodes);
+    a("eval_seed", eval_seed);
+    a("threads", threads);
+    a("seed", seed);
+    a.Require(synthetic_episodes >= 0 && rendered_episodes >= 0 && distractor_episodes >= 0 &&
+                  dagger_rounds >= 0 && dagger_episodes >= 0,
+              "synthetic_episodes", "non-negative episode counts");
+    a.Require(train_steps > 0 && batch > 0 && hidden > 0 && threads > 0, "train_steps",
+              "positive step, batch, layer and thread counts");
+    a.Require(scene_points > 0 && arm_points > 0, "scene_points", "positive point counts");
+    a.Require(level >= 0 && level <= 3, "level", "a randomization level 0..3");
+  }
+};
+
+// One data source: steps with the clouds, proprioception and privileged state seen, the action
+// taken and the target the student learns.
+struct DistillSource {
+  std::string name;
+  int scene_n = 0, arm_n = 0, proprio_dim = 0, state_dim = 0, target_dim = 0, action_dim = 0;
+  std::vector<float> scene, arm, proprio, state, target, action;
+  std::size_t size() const { return proprio_dim ? proprio.size() / proprio_dim : 0; }
+  // Appends another source's steps (same shapes).
+  void Append(const DistillSource& other);
+};
+
+// The rows of one co-training batch: `batch` rows drawn uniformly from each non-empty source in
+// equal shares (a remainder of r rows goes one each to the first r sources), as (source, row).
+std::vector<std::pair<int, std::size_t>> PlanBatch(const std::vector<const DistillSource*>& sources,
+                                                   int batch, core::Rng& rng);
+
+// The real demos (`demos record` layout) as a source: one-hot targets for discrete moves.
+DistillSource LoadDemoSource(const std::filesystem::path& demos);
+
+struct DistillStageReport {
+  std::string name;
+  int episodes = 0;     // run
+  int successes = 0;    // of them
+  int kept = 0;         // episodes added to the data
+  long steps = 0;       // steps added
+  double loss = 0;      // mean training loss over the stage's last 100 steps
+  double student = -1;  // the student's success in the twin afterwards (-1: not evaluated)
+  double seconds = 0;
+};
+
+struct DistillReport {
+  std::vector<DistillStageReport> stages;
+  long real_steps = 0;  // co-training steps from the real demos (0: sim only)
+  double seconds = 0;
+  std::filesystem::path curve;  // CSV, one row per stage
+};
+
+// Distils `teacher` (a state policy for `task`) into a point-cloud student written to `out`
+// (best weights by the student's success in the twin, or the last without evaluation). `real`
+// empty: no co-training.
+DistillReport TrainDistill(const std::filesystem::path& teacher,
+                           std::shared_ptr<const sim::Task> task, const std::filesystem::path& real,
+                           const std::filesystem::path& out, const DistillOptions& options,
+                           core::Progress* progress = nullptr);
+
+}  // namespace twinforge::learn

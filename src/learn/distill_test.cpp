@@ -1,0 +1,218 @@
+#include "learn/distill.h"
+
+#include <gtest/gtest.h>
+
+#include "core/dataset.h"
+#include "core/error.h"
+#include "core/test_support.h"
+#include "learn/policy_net.h"
+#include "learn/ppo.h"
+#include "learn/rollout.h"
+#include "learn/test_support.h"
+#include "learn/torch_runtime.h"
+#include "sim/env.h"
+
+namespace twinforge::learn {
+namespace {
+
+DistillSource Filled(const std::string& name, std::size_t steps) {
+  DistillSource s;
+  s.name = name;
+  s.scene_n = 2;
+  s.arm_n = 1;
+  s.proprio_dim = 1;
+  s.target_dim = 1;
+  s.scene.assign(6 * steps, 0.f);
+  s.arm.assign(3 * steps, 0.f);
+  s.proprio.assign(steps, 0.f);
+  s.target.assign(steps, 0.f);
+  return s;
+}
+
+// A network whose only non-zero weights are its last layer's biases: every input gets the same
+// output, with move `move` the most likely.
+PolicyNet ConstantPolicy(PolicyConfig config, int move) {
+  PolicyNet net(config);
+  torch::NoGradGuard no_grad;
+  torch::Tensor last_bias;
+  for (auto& p : net->named_parameters()) {
+    p.value().zero_();
+    if (p.key().find("bias") != std::string::npos && p.value().dim() == 1 &&
+        p.value().size(0) == config.action_dim)
+      last_bias = p.value();
+  }
+  EXPECT_TRUE(last_bias.defined());
+  for (int k = 0; k < config.action_dim; ++k) last_bias[k] = 0.1f * k;
+  last_bias[move] = 3.f;
+  return net;
+}
+
+TEST(Distill, CoTrainingBatchesHoldEqualSharesOfEverySource) {
+  const DistillSource real = Filled("real", 15), sim = Filled("synthetic", 5000),
+                      none = Filled("rendered", 0), dagger = Filled("dagger", 300);
+  const std::vector<const DistillSource*> sources = {&real, &sim, &none, &dagger};
+  core::Rng rng(3);
+  for (int batch : {63, 64}) {
+    std::vector<int> count(sources.size(), 0);
+    for (const auto& [source, row] : PlanBatch(sources, batch, rng)) {
+      ++count[source];
+      EXPECT_LT(row, sources[source]->size());
+    }
+    EXPECT_EQ(count[2], 0);  // the empty source
+    EXPECT_EQ(count[0] + count[1] + count[3], batch);
+    // 15 real steps against 5000 sim steps still make a third of every batch.
+    EXPECT_LE(std::abs(count[0] - count[1]), 1);
+    EXPECT_LE(std::abs(count[0] - count[3]), 1);
+  }
+  const DistillSource empty = Filled("x", 0);
+  EXPECT_THROW(PlanBatch({&empty}, 8, rng), core::Error);
+}
+
+// In DAgger the student's move is sent and the teacher's distribution is stored as the label; in
+// teacher rollouts the teacher's own move is sent.
+TEST(Distill, DaggerSendsTheStudentsMovesAndStoresTheTeachersLabels) {
+  PinMathThreads(1);
+  auto task = testing::ReachTask();
+  PolicyConfig tc;
+  tc.point_features = 0;
+  tc.proprio_dim = sim::StateDim(*task);
+  PolicyNet teacher = ConstantPolicy(tc, 2);
+  PolicyConfig sc;
+  sc.points = 64;
+  PolicyNet student = ConstantPolicy(sc, 9);
+  DistillRollout o;
+  o.keep_failures = true;
+  o.sample = false;
+  o.scene_points = 128;
+  o.arm_points = 32;
+  o.student_points = 64;
+  o.threads = 2;
+  const torch::Tensor label =
+      torch::softmax(teacher->forward(torch::Tensor(), torch::zeros({1, tc.proprio_dim}))[0], 0);
+  for (bool dagger : {true, false}) {
+    const DistillCollection got =
+        CollectDistill(teacher, dagger ? &student : nullptr, task, o, 0, 3);
+    EXPECT_EQ(got.episodes, 3);
+    EXPECT_EQ(got.kept, 3);
+    const DistillSource& d = got.data;
+    ASSERT_GT(d.size(), 0u);
+    EXPECT_EQ(d.scene.size(), d.size() * 3 * 128);
+    EXPECT_EQ(d.state.size(), d.size() * tc.proprio_dim);
+    for (std::size_t t = 0; t < d.size(); ++t) {
+      EXPECT_EQ(d.action[t], dagger ? 9.f : 2.f) << "step " << t;
+      for (int k = 0; k < 14; ++k) EXPECT_NEAR(d.target[14 * t + k], label[k].item<float>(), 1e-6);
+    }
+    // The first stored state is the env's state after the episode's reset.
+    sim::Env env(task);
+    env.Reset(core::MixSeed(o.seed, 0), o.level);
+    std::vector<float> state(tc.proprio_dim);
+    env.State(state.data());
+    for (int k = 0; k < tc.proprio_dim; ++k) EXPECT_EQ(d.state[k], state[k]);
+  }
+}
+
+TEST(Distill, TeacherRolloutsKeepOnlyTheirSuccesses) {
+  PinMathThreads(1);
+  auto task = testing::ReachTask(0.2);
+  PolicyConfig tc;
+  tc.point_features = 0;
+  tc.proprio_dim = sim::StateDim(*task);
+  torch::manual_seed(4);
+  PolicyNet teacher(tc);
+  DistillRollout o;
+  o.scene_points = 64;
+  o.arm_points = 16;
+  o.threads = 2;
+  const DistillCollection got = CollectDistill(teacher, nullptr, task, o, 0, 48);
+  EXPECT_GT(got.successes, 0);
+  EXPECT_LT(got.successes, got.episodes);
+  EXPECT_EQ(got.kept, got.successes);
+  // Same data on one thread.
+  o.threads = 1;
+  const DistillCollection one = CollectDistill(teacher, nullptr, task, o, 0, 48);
+  EXPECT_EQ(one.data.action, got.data.action);
+  EXPECT_EQ(one.data.scene, got.data.scene);
+}
+
+TEST(Distill, RealDemosWithOneHotTargetsAndBadMovesNamed) {
+  const auto dir = core::testing::TestDir("distill_test", "real");
+  std::filesystem::remove(dir / "real.hdf5");
+  {
+    core::DatasetWriter w =
+        core::DatasetWriter::Create(dir / "real.hdf5", {{"action_mode", "discrete"}});
+    core::Episode e;
+    e.actions = core::FloatArray({2, 1});
+    e.actions.data = {3.f, 13.f};
+    e.obs["proprio"] = core::FloatArray({2, 9});
+    e.obs["scene_points"] = core::FloatArray({2, 4, 3});
+    e.obs["arm_points"] = core::FloatArray({2, 2, 3});
+    e.rewards = {0.f, 1.f};
+    e.dones = {0, 1};
+    w.Add(e, core::Split::kTrain);
+    e.actions.data = {3.f, 14.f};
+    w.Add(e, core::Split::kTrain);
+  }
+  try {
+    LoadDemoSource(dir / "real.hdf5");
+    FAIL() << "move 14 was accepted";
+  } catch (const core::DatasetError& e) {
+    EXPECT_NE(std::string(e.what()).find("demo_1/actions row 1"), std::string::npos) << e.what();
+  }
+}
+
+// A teacher trained by PPO on the tiny task, distilled with small budgets: the student, seeing only
+// points and proprioception, succeeds far more often than an untrained one, and DAgger ran.
+TEST(Distill, TheStudentLearnsTheTeachersTask) {
+  PinMathThreads(1);
+  auto task = testing::ReachTask();
+  const auto dir = core::testing::TestDir("distill_test", "learns");
+  PpoOptions p;
+  p.num_envs = 16;
+  p.threads = 2;
+  p.eval_every = 5;
+  p.eval_episodes = 30;
+  p.max_seconds = 0;
+  p.max_iterations = 25;
+  p.target_success = 0.8;
+  const PpoReport teacher = TrainPpo(task, "", dir / "teacher.pt", p, true);
+  ASSERT_GE(teacher.best_eval_success, 0.6);
+
+  DistillOptions o;
+  o.synthetic_episodes = 60;
+  o.rendered_episodes = 30;
+  o.distractor_episodes = 0;
+  o.dagger_rounds = 1;
+  o.dagger_episodes = 30;
+  o.train_steps = 150;
+  o.batch = 32;
+  o.learning_rate = 1e-3;
+  o.sampling.n = 128;
+  o.hidden = 64;
+  o.scene_points = 256;
+  o.arm_points = 64;
+  o.eval_episodes = 40;
+  const DistillReport r = TrainDistill(dir / "teacher.pt", task, "", dir / "student.pt", o);
+  ASSERT_EQ(r.stages.size(), 3u);
+  EXPECT_EQ(r.stages[2].name, "dagger1");
+  EXPECT_EQ(r.stages[2].kept, 30);  // DAgger keeps failures too
+  EXPECT_EQ(r.stages[0].kept, r.stages[0].successes);
+
+  PolicyNet student = LoadPolicy(dir / "student.pt");
+  EXPECT_EQ(student->config().point_features, 4);
+  PolicyEvalOptions eval;
+  eval.episodes = 40;
+  eval.seed = 9000;  // the distillation's own evaluation episodes
+  eval.sample = true;
+  eval.threads = 2;
+  double best = 0;
+  for (const auto& s : r.stages) best = std::max(best, s.student);
+  EXPECT_DOUBLE_EQ(EvaluatePolicy(student, task, eval).success_rate(), best);
+  PolicyConfig untrained_config = student->config();
+  torch::manual_seed(1);
+  PolicyNet untrained(untrained_config);
+  const double before = EvaluatePolicy(untrained, task, eval).success_rate();
+  EXPECT_GE(best, before + 0.3) << "untrained " << before;
+}
+
+}  // namespace
+}  // namespace twinforge::learn
