@@ -41,13 +41,6 @@ struct ScanCli {
 };
 
 // `auto`: the robot's own operator if it has one, else a person at this terminal.
-std::unique_ptr<reality::Operator> MakeOperator(reality::Robot& robot, const std::string& mode,
-                                                const sim::TaskSpec& task) {
-  if (mode == "scripted" || (mode == "auto" && robot.Info().has_operator))
-    return std::make_unique<reality::RobotOperator>(robot);
-  return std::make_unique<reality::KeyboardOperator>(STDIN_FILENO, stderr, task.control.action,
-                                                     task.control.limits);
-}
 
 }  // namespace
 
@@ -84,7 +77,7 @@ void AddDataCommands(CLI::App& parent, int& exit_code) {
     const sim::TaskSpec task = sim::LoadTaskSpec(o.task);
     reality::RealityConnection connection(o.reality.Options());
     reality::Robot& robot = connection.robot();
-    const auto op = MakeOperator(robot, o.op, task);
+    const auto op = reality::MakeOperator(robot, o.op, task);
     spdlog::info("demos: recording {} demos of {} on {} with the {}", o.record.demos, task.name,
                  robot.Info().name, op->name());
     core::Progress progress("demos", o.record.demos, "demos");
@@ -150,7 +143,7 @@ void AddDataCommands(CLI::App& parent, int& exit_code) {
     const sim::TaskSpec task = sim::LoadTaskSpec(o.task);
     reality::RealityConnection connection(o.reality.Options());
     if (o.operate_first) {
-      const auto op = MakeOperator(connection.robot(), "auto", task);
+      const auto op = reality::MakeOperator(connection.robot(), "auto", task);
       spdlog::info("scan: the {} changes the scene first", op->name());
       reality::OperateThenHome(connection.robot(), *op, task);
     }

@@ -4,6 +4,7 @@
 
 #include "app/data_commands.h"
 #include "app/doctor.h"
+#include "app/pipeline_commands.h"
 #include "app/reality_commands.h"
 #include "app/sim_commands.h"
 #include "app/train_commands.h"
@@ -36,6 +37,7 @@ int main(int argc, char** argv) {
   app::AddDataCommands(app, exit_code);
   app::AddTwinCommands(app, exit_code);
   app::AddTrainCommands(app, exit_code);
+  app::AddPipelineCommands(app, exit_code);
 
   try {
     app.parse(argc, argv);

@@ -1,5 +1,8 @@
 #include "app/reality_commands.h"
 
+#include <sys/prctl.h>
+#include <unistd.h>
+
 #include <atomic>
 #include <csignal>
 #include <iostream>
@@ -19,6 +22,7 @@ void RequestStop(int) { g_stop = true; }
 
 struct ServeCli {
   std::string world;
+  int parent = 0;
   reality::ServeOptions serve;
 };
 
@@ -37,7 +41,14 @@ void AddRealityCommands(CLI::App& parent, int& exit_code) {
   serve->add_option("--bind", serve_cli->serve.bind,
                     "address to listen on (not loopback: --token is required)");
   serve->add_option("--token", serve_cli->serve.token, "shared secret clients must send");
+  serve->add_option("--parent", serve_cli->parent,
+                    "stop when this process (the pipeline that started the server) dies");
   serve->callback([serve_cli] {
+    if (serve_cli->parent > 0) {
+      // A pipeline killed outright (SIGKILL) cannot stop its proxy: the kernel does.
+      ::prctl(PR_SET_PDEATHSIG, SIGTERM);
+      if (::getppid() != serve_cli->parent) return;  // it died before prctl took effect
+    }
     reality::ProxyReality proxy(reality::ResolveWorldDir(serve_cli->world));
     reality::BridgeServer server(proxy, serve_cli->serve);
     std::signal(SIGINT, RequestStop);

@@ -8,6 +8,7 @@
 #include "core/log.h"
 #include "learn/bc.h"
 #include "learn/bench.h"
+#include "learn/distill.h"
 #include "learn/evaluate.h"
 #include "learn/ppo.h"
 #include "learn/rollout.h"
@@ -45,6 +46,11 @@ struct RlCli {
   std::string task, twin, demos, out;
   bool fresh = false;
   learn::PpoOptions options;
+};
+
+struct DistillCli {
+  std::string teacher, task, twin, real, out;
+  learn::DistillOptions options;
 };
 
 struct ExportCli {
@@ -97,6 +103,63 @@ void AddInverseDistill(CLI::App& train, int& exit_code) {
     if (exit_code)
       spdlog::error("inverse distillation: only {} of {} demos within {} attempts", r.successes,
                     cli->options.successes, r.attempts);
+  });
+}
+
+void AddDistill(CLI::App& train, int& exit_code) {
+  auto cli = std::make_shared<DistillCli>();
+  auto* c = train.add_subcommand(
+      "distill",
+      "teacher-student distillation into a point-cloud policy, co-trained with real demos (JSON)");
+  c->add_option("--teacher", cli->teacher, "state teacher from `train rl`")
+      ->required()
+      ->check(CLI::ExistingFile);
+  c->add_option("--task", cli->task, "task name (the twin's) or task.yaml")->required();
+  c->add_option("--twin", cli->twin, "twin directory; default: the task's own scene");
+  c->add_option("--real-demos", cli->real, "real demos to co-train with, or none")->required();
+  c->add_option("--out", cli->out, "student policy; its per-stage curve goes beside it (.csv)")
+      ->required();
+  auto& o = cli->options;
+  c->add_option("--synthetic", o.synthetic_episodes,
+                "stage 1: teacher episodes on synthetic clouds");
+  c->add_option("--rendered", o.rendered_episodes, "stage 2: teacher episodes on rendered depth");
+  c->add_option("--distractors", o.distractor_episodes,
+                "stage 3: teacher episodes with distractors (level 2)");
+  c->add_option("--dagger-rounds", o.dagger_rounds, "stage 4: DAgger rounds");
+  c->add_option("--dagger-episodes", o.dagger_episodes, "student episodes per DAgger round");
+  c->add_option("--train-steps", o.train_steps, "gradient steps after each stage and round")
+      ->check(CLI::PositiveNumber);
+  c->add_option("--eval-episodes", o.eval_episodes,
+                "the student's episodes in the twin after each stage (0: none)");
+  c->add_option("--level", o.level, "randomization level 0..3")->check(CLI::Range(0, 3));
+  c->add_option("--seed", o.seed, "seed");
+  c->add_option("--threads", o.threads, "worker threads")->check(CLI::PositiveNumber);
+  c->callback([cli, &exit_code] {
+    auto task = LoadTrainTask(cli->task, cli->twin);
+    const std::string real = cli->real == "none" ? "" : cli->real;
+    if (!real.empty() && !std::filesystem::exists(real))
+      throw core::IoError("--real-demos " + real + ": no such file (or say none)");
+    const auto& o = cli->options;
+    core::Progress progress("distill", 3 + o.dagger_rounds, "stages");
+    const learn::DistillReport r =
+        learn::TrainDistill(cli->teacher, task, real, cli->out, o, &progress);
+    progress.Finish();
+    nlohmann::json stages = nlohmann::json::array();
+    for (const auto& s : r.stages)
+      stages.push_back({{"stage", s.name},
+                        {"episodes", s.episodes},
+                        {"successes", s.successes},
+                        {"kept", s.kept},
+                        {"steps", s.steps},
+                        {"loss", s.loss},
+                        {"student_success", s.student},
+                        {"seconds", s.seconds}});
+    const nlohmann::json report = {{"teacher", cli->teacher},    {"task", task->spec().name},
+                                   {"student", cli->out},        {"real_demos", real},
+                                   {"real_steps", r.real_steps}, {"stages", stages},
+                                   {"curve", r.curve.string()},  {"seconds", r.seconds}};
+    std::cout << report.dump(2) << "\n";
+    exit_code = 0;
   });
 }
 
@@ -217,6 +280,7 @@ void AddTrainCommands(CLI::App& parent, int& exit_code) {
   });
   AddInverseDistill(*train, exit_code);
   AddRl(*train, exit_code);
+  AddDistill(*train, exit_code);
   AddExport(*train, exit_code);
   auto bench_options = std::make_shared<learn::LearnBenchOptions>();
   auto* bench = train->add_subcommand(

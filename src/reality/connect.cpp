@@ -48,9 +48,17 @@ RealityConnection::RealityConnection(const ConnectOptions& options) {
   const std::string world = options.address.substr(prefix.size());
   const int port = FreeLoopbackPort();
   address_ = "tcp://127.0.0.1:" + std::to_string(port);
-  std::vector<std::string> args = {"twinforge", "--log-level", "warn",
-                                   "reality",   "serve",       "--world",
-                                   world,       "--port",      std::to_string(port)};
+  std::vector<std::string> args = {"twinforge",
+                                   "--log-level",
+                                   "warn",
+                                   "reality",
+                                   "serve",
+                                   "--world",
+                                   world,
+                                   "--port",
+                                   std::to_string(port),
+                                   "--parent",
+                                   std::to_string(::getpid())};
   if (!options.token.empty()) args.insert(args.end(), {"--token", options.token});
   std::vector<char*> argv;
   for (auto& a : args) argv.push_back(a.data());

@@ -188,4 +188,12 @@ OperatorRun RunOperator(Robot& robot, Operator& op, ActionClient& client, Observ
   return run;
 }
 
+std::unique_ptr<Operator> MakeOperator(Robot& robot, const std::string& mode,
+                                       const sim::TaskSpec& task) {
+  if (mode == "scripted" || (mode == "auto" && robot.Info().has_operator))
+    return std::make_unique<RobotOperator>(robot);
+  return std::make_unique<KeyboardOperator>(STDIN_FILENO, stderr, task.control.action,
+                                            task.control.limits);
+}
+
 }  // namespace twinforge::reality

@@ -99,6 +99,11 @@ using BeforeAct = std::function<void(const Observation&, const sim::Action&)>;
 OperatorRun RunOperator(Robot& robot, Operator& op, ActionClient& client, Observation& o,
                         int max_actions, bool with_frames, const BeforeAct& before_act = nullptr);
 
+// The operator for `mode`: "scripted" (the robot's own, Info().has_operator), "keyboard" (a
+// person at this terminal) or "auto" (the robot's own when it has one, else the keyboard).
+std::unique_ptr<Operator> MakeOperator(Robot& robot, const std::string& mode,
+                                       const sim::TaskSpec& task);
+
 // A person at a terminal. Keys (printed by Help()):
 //   w/s +x/-x (away from / toward the robot base)   a/d +y/-y   r/f up/down
 //   u/j roll   i/k pitch   o/l yaw   c close the gripper   v open it

@@ -1,0 +1,154 @@
+#include "app/pipeline_commands.h"
+
+#include <unistd.h>
+
+#include <iostream>
+#include <memory>
+#include <nlohmann/json.hpp>
+
+#include "app/reality_cli.h"
+#include "core/config.h"
+#include "core/error.h"
+#include "core/log.h"
+#include "pipeline/main_job.h"
+#include "pipeline/reality_eval.h"
+#include "sim/task.h"
+
+namespace twinforge::app {
+
+namespace {
+
+struct EvalCli {
+  RealityCli reality;
+  std::string policy, task, out;
+  std::vector<int> levels = {1, 2, 3};
+  pipeline::RealityEvalOptions options;
+};
+
+// Asks the person at the robot whether the trial succeeded (a robot without an oracle).
+bool AskPerson(const pipeline::TrialRecord& t) {
+  for (;;) {
+    std::fprintf(stderr, "level %d trial %d: did it succeed? [y/n] ", t.level, t.trial);
+    std::string answer;
+    if (!std::getline(std::cin, answer))
+      throw core::Error("eval: no answer on standard input for level " + std::to_string(t.level) +
+                        " trial " + std::to_string(t.trial));
+    if (answer == "y" || answer == "yes") return true;
+    if (answer == "n" || answer == "no") return false;
+  }
+}
+
+nlohmann::json ToJson(const pipeline::RealityEvalReport& r) {
+  nlohmann::json levels = nlohmann::json::array();
+  for (const auto& l : r.levels)
+    levels.push_back({{"level", l.level},
+                      {"trials", l.trials},
+                      {"successes", l.successes},
+                      {"success_rate", l.rate},
+                      {"interval_95", {l.low, l.high}}});
+  return {{"levels", levels}, {"resumed_trials", r.resumed}, {"seconds", r.seconds}};
+}
+
+void AddEval(CLI::App& parent, int& exit_code) {
+  auto cli = std::make_shared<EvalCli>();
+  auto* c = parent.add_subcommand(
+      "eval",
+      "run a point-cloud policy on reality: seeded trials per level, success from the robot's "
+      "oracle or asked of you, 95% intervals; every trial logged (JSON report)");
+  cli->reality.Add(c);
+  c->add_option("--policy", cli->policy, "point-cloud policy (train bc / train distill)")
+      ->required()
+      ->check(CLI::ExistingFile);
+  c->add_option("--task", cli->task, "task name or task.yaml")->required();
+  c->add_option("--levels", cli->levels, "randomization levels, e.g. 1,2,3")
+      ->delimiter(',')
+      ->check(CLI::Range(0, 3));
+  c->add_option("--trials", cli->options.trials, "trials per level")->check(CLI::PositiveNumber);
+  c->add_option("--seed", cli->options.seed, "trial seeds (the same for every policy compared)");
+  c->add_flag("--sample", cli->options.sample, "sample the policy's moves (default: most likely)");
+  c->add_option("--out", cli->out,
+                "trial log (JSON lines; an existing log of the same policy is resumed)")
+      ->required();
+  c->callback([cli, &exit_code] {
+    cli->options.levels = cli->levels;
+    const sim::TaskSpec task = sim::LoadTaskSpec(cli->task);
+    reality::RealityConnection connection(cli->reality.Options());
+    core::Progress progress("eval", int64_t(cli->levels.size()) * cli->options.trials, "trials");
+    const pipeline::RealityEvalReport r = pipeline::EvaluateOnReality(
+        connection.robot(), cli->policy, task, cli->options, cli->out,
+        ::isatty(STDIN_FILENO) ? pipeline::SuccessJudge(AskPerson) : nullptr, &progress);
+    progress.Finish();
+    nlohmann::json report = ToJson(r);
+    report["policy"] = cli->policy;
+    report["task"] = task.name;
+    report["reality"] = connection.address();
+    report["log"] = cli->out;
+    std::cout << report.dump(2) << "\n";
+    exit_code = 0;
+  });
+}
+
+struct RunCli {
+  RealityCli reality;
+  std::string out = "runs/open_drawer", config;
+  pipeline::MainJobOptions options;
+};
+
+void AddRun(CLI::App& parent, int& exit_code) {
+  auto cli = std::make_shared<RunCli>();
+  cli->reality.address = "";
+  auto* c = parent.add_subcommand(
+      "run",
+      "the main job: scan, twin, demos, BC, inverse distillation, RL, distillation, evaluation on "
+      "reality, report; re-running skips finished stages and resumes a killed one");
+  cli->reality.Add(c);
+  auto& o = cli->options;
+  c->add_option("--task", o.task, "task name or task.yaml");
+  c->add_option("--out", cli->out, "run directory");
+  c->add_option("--config", cli->config,
+                "options file (YAML/JSON; config.json of an earlier run); flags override it");
+  c->add_option("--demos", o.demos, "real demos to record")->check(CLI::PositiveNumber);
+  c->add_option("--rl-minutes", o.rl_minutes, "PPO + BC budget in minutes");
+  c->add_option("--levels", o.levels, "evaluation levels, e.g. 1,2,3")
+      ->delimiter(',')
+      ->check(CLI::Range(0, 3));
+  c->add_option("--trials", o.trials, "evaluation trials per level")->check(CLI::PositiveNumber);
+  c->add_option("--threads", o.threads, "worker threads")->check(CLI::PositiveNumber);
+  c->add_option("--seed", o.seed, "seed");
+  c->callback([cli, c, &exit_code] {
+    pipeline::MainJobOptions o = cli->options;
+    if (!cli->config.empty()) {
+      o = core::LoadConfig<pipeline::MainJobOptions>(cli->config);
+      // Flags given on the command line win over the file.
+      for (const char* flag :
+           {"--task", "--demos", "--rl-minutes", "--levels", "--trials", "--threads", "--seed"})
+        if (c->count(flag)) {
+          const std::string f = flag;
+          if (f == "--task") o.task = cli->options.task;
+          if (f == "--demos") o.demos = cli->options.demos;
+          if (f == "--rl-minutes") o.rl_minutes = cli->options.rl_minutes;
+          if (f == "--levels") o.levels = cli->options.levels;
+          if (f == "--trials") o.trials = cli->options.trials;
+          if (f == "--threads") o.threads = cli->options.threads;
+          if (f == "--seed") o.seed = cli->options.seed;
+        }
+    }
+    if (!cli->reality.address.empty()) o.reality = cli->reality.address;
+    if (o.reality.empty()) o.reality = "proxy:" + sim::LoadTaskSpec(o.task).name;
+    o.token = cli->reality.token;
+    pipeline::RunMainJob(o, cli->out);
+    std::cout << nlohmann::json{{"run", cli->out}, {"report", cli->out + "/eval/report.html"}}.dump(
+                     2)
+              << "\n";
+    exit_code = 0;
+  });
+}
+
+}  // namespace
+
+void AddPipelineCommands(CLI::App& parent, int& exit_code) {
+  AddEval(parent, exit_code);
+  AddRun(parent, exit_code);
+}
+
+}  // namespace twinforge::app

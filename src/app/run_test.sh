@@ -1,0 +1,43 @@
+#!/usr/bin/env bash
+# The main job on the smoke budget (assets/runs/smoke.json): killed outright while training, then
+# run again. The finished stages are skipped, the killed one resumes, the rest run, the report and
+# both evaluations are written, and no proxy-reality server outlives its pipeline.
+# usage: run_test.sh TWINFORGE_BINARY SOURCE_DIR
+set -euo pipefail
+tf=$1
+src=$2
+d=$(mktemp -d)
+trap 'rm -rf "$d"' EXIT
+"$tf" run --config "$src/assets/runs/smoke.json" --out "$d/run" 2> "$d/first.log" &
+pid=$!
+# Kill once the teacher's training has started (its checkpoint is written every iteration).
+for _ in $(seq 1 600); do
+  [ -f "$d/run/policies/teacher.ckpt" ] && break
+  kill -0 $pid 2> /dev/null || { cat "$d/first.log" >&2; echo "the run ended early" >&2; exit 1; }
+  sleep 0.1
+done
+kill -9 $pid
+wait $pid 2> /dev/null || true
+sleep 0.5
+if pgrep -f "reality serve --world open_drawer --port [0-9]* --parent $pid" > /dev/null; then
+  echo "the killed run's proxy reality is still running" >&2
+  exit 1
+fi
+grep -q '"bc"' "$d/run/manifest.json"
+if grep -q '"rl"' "$d/run/manifest.json"; then echo "rl recorded before it finished" >&2; exit 1; fi
+"$tf" run --config "$src/assets/runs/smoke.json" --out "$d/run" > "$d/out.json" 2> "$d/second.log"
+for stage in scan twin demos bc inverse_distill; do
+  grep -q "stage [0-9]*/10 $stage: up to date" "$d/second.log" ||
+    { echo "stage $stage ran again" >&2; cat "$d/second.log" >&2; exit 1; }
+done
+grep -q "resum" "$d/second.log" || { echo "rl did not resume its checkpoint" >&2; exit 1; }
+for f in eval/report.html eval/student.json eval/bc_real.json eval/student.jsonl \
+  policies/student.pt policies/teacher.pt eval/twin_view.png; do
+  [ -s "$d/run/$f" ] || { echo "missing $f" >&2; exit 1; }
+done
+grep -q "Success on reality" "$d/run/eval/report.html"
+[ "$(wc -l < "$d/run/eval/student.jsonl")" -eq 5 ]  # header + 2 levels x 2 trials
+# A third run has nothing left to do but the report.
+"$tf" run --config "$src/assets/runs/smoke.json" --out "$d/run" > /dev/null 2> "$d/third.log"
+[ "$(grep -c 'up to date' "$d/third.log")" -eq 9 ]
+echo ALL-GOOD

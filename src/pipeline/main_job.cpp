@@ -1,0 +1,302 @@
+#include "pipeline/main_job.h"
+
+#include <ctime>
+#include <fstream>
+#include <functional>
+#include <memory>
+
+#include "core/config.h"
+#include "core/error.h"
+#include "core/log.h"
+#include "core/measure.h"
+#include "learn/bc.h"
+#include "learn/evaluate.h"
+#include "learn/ppo.h"
+#include "pipeline/reality_eval.h"
+#include "pipeline/run_directory.h"
+#include "real2sim/build.h"
+#include "reality/connect.h"
+#include "reality/demos.h"
+#include "reality/teleop.h"
+
+namespace twinforge::pipeline {
+
+namespace {
+
+std::string NowUtc() {
+  const std::time_t t = std::time(nullptr);
+  char text[32];
+  std::strftime(text, sizeof text, "%Y-%m-%dT%H:%M:%SZ", std::gmtime(&t));
+  return text;
+}
+
+// Writes through `part` and renames to `path` once `write` finished, so a killed stage never
+// leaves a file that looks complete.
+void WriteThenRename(const std::filesystem::path& path,
+                     const std::function<void(const std::filesystem::path&)>& write) {
+  std::filesystem::path part = path;
+  part += ".part";
+  std::filesystem::remove(part);
+  write(part);
+  std::filesystem::rename(part, path);
+}
+
+void WriteJson(const std::filesystem::path& path, const nlohmann::json& value) {
+  std::filesystem::create_directories(path.parent_path());
+  WriteThenRename(path, [&](const std::filesystem::path& part) {
+    std::ofstream(part) << value.dump(2) << "\n";
+  });
+}
+
+nlohmann::json EvalJson(const RealityEvalReport& r, const std::string& policy) {
+  nlohmann::json levels = nlohmann::json::array();
+  for (const auto& l : r.levels)
+    levels.push_back({{"level", l.level},
+                      {"trials", l.trials},
+                      {"successes", l.successes},
+                      {"success_rate", l.rate},
+                      {"interval_95", {l.low, l.high}}});
+  return {{"policy", policy}, {"levels", levels}, {"seconds", r.seconds}};
+}
+
+int ReadSuccesses(const std::filesystem::path& report) {
+  std::ifstream in(report);
+  const nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
+  return j.is_object() ? j.value("successes", 0) : 0;
+}
+
+class Job {
+ public:
+  Job(const MainJobOptions& options, const std::filesystem::path& out)
+      : o_(options), run_(out), task_(sim::LoadTaskSpec(options.task)) {}
+
+  void Run() {
+    core::SaveConfig(run_ / "config.json", o_);
+    const bool articulated = !task_.joints.empty();
+    const std::string reality = Fingerprint().Add(o_.reality).Add(task_.name).Hex();
+    Stage("scan", Fingerprint().Add(reality).Add(core::ToJson(o_.scan).dump()).Hex(),
+          articulated
+              ? std::vector<std::string>{"scan/trajectory.json", "scan_open/trajectory.json"}
+              : std::vector<std::string>{"scan/trajectory.json"},
+          [&] {
+            Scan(run_ / "scan", false);
+            if (articulated) Scan(run_ / "scan_open", true);
+          });
+    Stage("twin",
+          Fingerprint()
+              .AddFile(run_ / "scan/trajectory.json")
+              .AddFile(run_ / "scan_open/trajectory.json")
+              .Add(core::ToJson(task_).dump())
+              .Hex(),
+          {"twin/task.yaml", "twin/scene.xml"}, [&] {
+            real2sim::BuildOptions b;
+            b.task = task_;
+            if (articulated) b.scan_after = run_ / "scan_open";
+            std::filesystem::remove_all(run_ / "twin");
+            WriteJson(run_ / "twin_build.json",
+                      real2sim::BuildTwin(run_ / "scan", run_ / "twin", b));
+          });
+    Stage("demos", Fingerprint().Add(reality).Add(std::to_string(o_.demos)).Hex(),
+          {"demos/real.hdf5"}, [&] {
+            reality::Robot& robot = Robot();
+            const auto op = reality::MakeOperator(robot, "auto", task_);
+            reality::RecordOptions r;
+            r.demos = o_.demos;
+            r.seed = o_.seed;
+            std::filesystem::create_directories(run_ / "demos");
+            core::Progress progress("demos", o_.demos, "demos");
+            WriteThenRename(run_ / "demos/real.hdf5", [&](const std::filesystem::path& part) {
+              const auto report = reality::RecordDemos(robot, *op, task_, r, part, &progress);
+              if (report.kept < o_.demos)
+                throw core::Error("demos: only " + std::to_string(report.kept) + " of " +
+                                  std::to_string(o_.demos) + " demos in " +
+                                  std::to_string(report.attempts) + " attempts");
+            });
+            progress.Finish();
+          });
+    Stage("bc", Fingerprint().AddFile(run_ / "demos/real.hdf5").Add(std::to_string(o_.seed) + "/" + std::to_string(o_.bc_epochs)).Hex(),
+          {"policies/bc_real.pt"}, [&] {
+            learn::BcOptions b;
+            b.seed = o_.seed;
+            b.max_epochs = o_.bc_epochs;
+            core::Progress progress("bc", b.max_epochs, "epochs");
+            const auto r = learn::TrainBc(run_ / "demos/real.hdf5", run_ / "policies/bc_real.pt", b,
+                                          &progress);
+            progress.Finish();
+            WriteJson(run_ / "policies/bc_real.json", {{"valid_accuracy", r.valid_accuracy},
+                                                       {"epochs", r.epochs},
+                                                       {"seconds", r.seconds}});
+          });
+    auto twin_task =
+        std::make_shared<const sim::Task>(sim::LoadTaskSpec((run_ / "twin/task.yaml").string()));
+    const std::string twin_hash =
+        Fingerprint().AddFile(run_ / "twin/task.yaml").AddFile(run_ / "twin/scene.xml").Hex();
+    Stage(
+        "inverse_distill",
+        Fingerprint()
+            .Add(twin_hash)
+            .AddFile(run_ / "policies/bc_real.pt")
+            .Add(std::to_string(o_.inverse_demos) + "/" + std::to_string(o_.inverse_attempts) +
+                 "/" + std::to_string(o_.inverse_temperature))
+            .Hex(),
+        {"demos/sim.hdf5"}, [&] {
+          learn::InverseDistillOptions i;
+          i.successes = o_.inverse_demos;
+          i.rollout.episodes = o_.inverse_attempts;
+          i.rollout.sample = true;
+          i.rollout.temperature = o_.inverse_temperature;
+          i.rollout.threads = o_.threads;
+          i.rollout.seed = o_.seed;
+          core::Progress progress("inverse distillation", o_.inverse_demos, "demos");
+          learn::InverseDistillReport r;
+          WriteThenRename(run_ / "demos/sim.hdf5", [&](const std::filesystem::path& part) {
+            r = learn::InverseDistill(run_ / "policies/bc_real.pt", twin_task, i, part, &progress);
+            if (r.successes == 0)
+              spdlog::warn(
+                  "inverse distillation: the real-demo policy succeeded in none of {} episodes in "
+                  "the twin; the teacher trains by PPO alone, which rarely learns a sparse task "
+                  "(record more demos, or raise inverse_attempts)",
+                  r.attempts);
+          });
+          progress.Finish();
+          WriteJson(run_ / "demos/sim.json", {{"attempts", r.attempts},
+                                              {"successes", r.successes},
+                                              {"success_rate", r.success_rate()},
+                                              {"seconds", r.seconds}});
+        });
+    Stage("rl",
+          Fingerprint()
+              .Add(twin_hash)
+              .AddFile(run_ / "demos/sim.hdf5")
+              .Add(std::to_string(o_.rl_minutes) + "/" + std::to_string(o_.rl_target) + "/" +
+                   std::to_string(o_.rl_envs) + "/" + std::to_string(o_.seed))
+              .Hex(),
+          {"policies/teacher.pt", "policies/teacher.curve.svg"}, [&] {
+            learn::PpoOptions p;
+            p.num_envs = o_.rl_envs;
+            p.threads = o_.threads;
+            p.seed = o_.seed;
+            p.max_seconds = 60 * o_.rl_minutes;
+            p.target_success = o_.rl_target;
+            p.eval_episodes = o_.rl_eval_episodes;
+            core::Progress progress("rl", 0, "iterations");
+            const bool demos = ReadSuccesses(run_ / "demos/sim.json") > 0;
+            const auto r = learn::TrainPpo(twin_task, demos ? run_ / "demos/sim.hdf5" : "",
+                                           run_ / "policies/teacher.pt", p, false, &progress);
+            progress.Finish();
+            WriteJson(run_ / "policies/teacher.json", {{"best_eval_success", r.best_eval_success},
+                                                       {"iterations", r.iterations},
+                                                       {"env_steps", r.env_steps},
+                                                       {"stopped_by", r.stopped_by},
+                                                       {"seconds", r.seconds}});
+          });
+    Stage("distill",
+          Fingerprint()
+              .Add(twin_hash)
+              .AddFile(run_ / "policies/teacher.pt")
+              .AddFile(run_ / "demos/real.hdf5")
+              .Add(core::ToJson(o_.distill).dump())
+              .Hex(),
+          {"policies/student.pt"}, [&] {
+            learn::DistillOptions d = o_.distill;
+            d.threads = o_.threads;
+            core::Progress progress("distill", 3 + d.dagger_rounds, "stages");
+            learn::TrainDistill(run_ / "policies/teacher.pt", twin_task, run_ / "demos/real.hdf5",
+                                run_ / "policies/student.pt", d, &progress);
+            progress.Finish();
+          });
+    for (const std::string policy : {"student", "bc_real"}) {
+      RealityEvalOptions e;
+      e.levels = o_.levels;
+      e.trials = o_.trials;
+      e.seed = o_.seed + 5000;
+      e.frames = run_ / "eval/frames" / policy;
+      const std::filesystem::path file = run_ / ("policies/" + policy + ".pt");
+      Stage("eval_" + policy,
+            Fingerprint()
+                .Add(reality)
+                .AddFile(file)
+                .Add(std::to_string(e.trials) + "/" + std::to_string(e.seed))
+                .Add(core::ToJson(o_.levels).dump())
+                .Hex(),
+            {"eval/" + policy + ".json"}, [&] {
+              core::Progress progress("eval " + policy, int64_t(e.levels.size()) * e.trials,
+                                      "trials");
+              const auto r =
+                  EvaluateOnReality(Robot(), file, task_, e, run_ / ("eval/" + policy + ".jsonl"),
+                                    nullptr, &progress);
+              progress.Finish();
+              WriteJson(run_ / ("eval/" + policy + ".json"), EvalJson(r, policy));
+            });
+    }
+    Stage("report", Fingerprint().Add(NowUtc()).Hex(), {"eval/report.html"},
+          [&] { WriteReport(run_.root()); });
+    spdlog::info("run: done in {:.0f} min; report {}", TotalMinutes(),
+                 (run_ / "eval/report.html").string());
+  }
+
+ private:
+  static constexpr int kStages = 10;
+
+  void Stage(const std::string& name, const std::string& inputs,
+             const std::vector<std::string>& outputs, const std::function<void()>& body) {
+    ++index_;
+    if (run_.UpToDate(name, inputs)) {
+      spdlog::info("run: stage {}/{} {}: up to date", index_, kStages, name);
+      return;
+    }
+    spdlog::info("run: stage {}/{} {} ({:.1f} min into this session)", index_, kStages, name,
+                 TotalMinutes());
+    const auto start = core::Clock::now();
+    try {
+      body();
+    } catch (const core::Error& e) {
+      throw core::Error("run " + run_.root().string() + ": stage '" + name +
+                        "' failed: " + e.what());
+    }
+    run_.Record(name, {inputs, outputs, core::SecondsSince(start), ""});
+  }
+
+  // Minutes since this session of the run started.
+  double TotalMinutes() const { return core::SecondsSince(start_) / 60; }
+
+  void Scan(const std::filesystem::path& dir, bool operate_first) {
+    reality::Robot& robot = Robot();
+    if (operate_first) {
+      const auto op = reality::MakeOperator(robot, "auto", task_);
+      spdlog::info("scan: the {} changes the scene first", op->name());
+      reality::OperateThenHome(robot, *op, task_);
+    }
+    std::filesystem::remove_all(dir);
+    const auto path = reality::ScanPath(task_, o_.scan);
+    core::Progress progress("scan", static_cast<int64_t>(path.size()), "frames");
+    reality::CaptureScan(robot, path, reality::ScanIntrinsics(o_.scan), dir, &progress);
+    progress.Finish();
+  }
+
+  // One connection for every stage that needs reality, opened when first needed.
+  reality::Robot& Robot() {
+    if (!connection_) {
+      if (o_.reality.empty())
+        throw core::ConfigError("run", "reality", "an address (tcp://host:port or proxy:WORLD)");
+      connection_ = std::make_unique<reality::RealityConnection>(
+          reality::ConnectOptions{.address = o_.reality, .token = o_.token});
+    }
+    return connection_->robot();
+  }
+
+  MainJobOptions o_;
+  RunDirectory run_;
+  sim::TaskSpec task_;
+  std::unique_ptr<reality::RealityConnection> connection_;
+  int index_ = 0;
+  core::Clock::time_point start_ = core::Clock::now();
+};
+
+}  // namespace
+
+void RunMainJob(const MainJobOptions& options, const std::filesystem::path& out) {
+  Job(options, out).Run();
+}
+
+}  // namespace twinforge::pipeline

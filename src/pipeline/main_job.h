@@ -1,0 +1,78 @@
+// The main job: every stage from the scan to the evaluated student, in one run directory.
+//
+//   runs/NAME/scan/, scan_open/     RGB-D scans (the second after the operator moved the part)
+//   runs/NAME/twin/                 the articulated twin and its task.yaml
+//   runs/NAME/demos/real.hdf5       teleoperated demos on reality
+//   runs/NAME/policies/bc_real.pt   BC on them
+//   runs/NAME/demos/sim.hdf5        inverse distillation's successes in the twin
+//   runs/NAME/policies/teacher.pt   PPO + BC on privileged state (its .ckpt resumes a killed run)
+//   runs/NAME/policies/student.pt   teacher-student distillation, co-trained with the real demos
+//   runs/NAME/eval/*.jsonl, *.json  every trial on reality, and the rates with 95% intervals
+//   runs/NAME/eval/report.html      the twin, the curves, the results table, frames
+//   runs/NAME/config.json, manifest.json, log.txt
+//
+// A stage runs only when its inputs (the options it uses and the files it reads, by content)
+// changed or an output is missing; a killed run resumes at the stage it was in.
+#pragma once
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "learn/distill.h"
+#include "reality/scan.h"
+
+namespace twinforge::pipeline {
+
+struct MainJobOptions {
+  std::string task = "open_drawer";  // built-in task name or task file
+  std::string reality;               // address (tcp://host:port or proxy:WORLD)
+  std::string token;
+  reality::ScanOptions scan;
+  int demos = 15;
+  int bc_epochs = 300;  // at most (early stopping)
+  int inverse_demos = 12;  // sim demos to keep
+  int inverse_attempts = 3000;
+  double inverse_temperature = 0.5;
+  double rl_minutes = 20;  // PPO + BC budget (stops earlier at its target)
+  double rl_target = 0.9;
+  int rl_envs = 64;
+  int rl_eval_episodes = 100;
+  learn::DistillOptions distill;
+  std::vector<int> levels = {1, 2, 3};
+  int trials = 50;  // per level, for the student and the BC baseline
+  int threads = 2;
+  uint64_t seed = 1;
+  template <class A>
+  void Serialize(A& a) {
+    a("task", task);
+    a("reality", reality);
+    a("scan", scan);
+    a("demos", demos);
+    a("bc_epochs", bc_epochs);
+    a("inverse_demos", inverse_demos);
+    a("inverse_attempts", inverse_attempts);
+    a("inverse_temperature", inverse_temperature);
+    a("rl_minutes", rl_minutes);
+    a("rl_target", rl_target);
+    a("rl_envs", rl_envs);
+    a("rl_eval_episodes", rl_eval_episodes);
+    a("distill", distill);
+    a("levels", levels);
+    a("trials", trials);
+    a("threads", threads);
+    a("seed", seed);
+    a.Require(demos > 0 && inverse_demos > 0 && inverse_attempts > 0 && trials > 0, "demos",
+              "positive demo, attempt and trial counts");
+    a.Require(rl_envs > 0 && threads > 0, "threads", "positive env and thread counts");
+  }
+};
+
+// Runs (or resumes) the job in `out`. Throws Error naming the stage that failed; stages finished
+// before it stay recorded.
+void RunMainJob(const MainJobOptions& options, const std::filesystem::path& out);
+
+// Writes out/eval/report.html from whatever the run directory holds.
+std::filesystem::path WriteReport(const std::filesystem::path& out);
+
+}  // namespace twinforge::pipeline

@@ -1,0 +1,217 @@
+#include "pipeline/reality_eval.h"
+
+#include <algorithm>
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+
+#include "core/error.h"
+#include "core/image.h"
+#include "core/log.h"
+#include "core/measure.h"
+#include "learn/bc.h"
+#include "learn/policy_net.h"
+#include "learn/rollout.h"
+#include "pipeline/run_directory.h"
+#include "reality/frame_cloud.h"
+#include "reality/teleop.h"
+#include "sim/env.h"
+
+namespace twinforge::pipeline {
+
+std::pair<double, double> BootstrapInterval(int successes, int trials, int resamples,
+                                            core::Rng& rng) {
+  if (trials <= 0) return {0.0, 0.0};
+  const double p = double(successes) / trials;
+  std::vector<double> rates(std::max(resamples, 1));
+  for (double& r : rates) {
+    int s = 0;
+    for (int i = 0; i < trials; ++i) s += rng.Uniform() < p;
+    r = double(s) / trials;
+  }
+  std::sort(rates.begin(), rates.end());
+  const auto at = [&](double q) {
+    return rates[std::min(rates.size() - 1, static_cast<std::size_t>(q * double(rates.size())))];
+  };
+  return {at(0.025), at(0.975)};
+}
+
+namespace {
+
+// The policy at the controls: sees the camera's clouds and the proprioception, says "done" as
+// soon as the robot's oracle reports success.
+class PolicyOperator : public reality::Operator {
+ public:
+  PolicyOperator(reality::Robot& robot, learn::PolicyNet& net, const sim::TaskSpec& task,
+                 const RealityEvalOptions& options, bool oracle)
+      : robot_(robot),
+        net_(net),
+        oracle_(oracle),
+        cloud_(sim::LoadRobotSpec(reality::RobotDescriptionPath(robot.Info().robot)),
+               task.workspace, {options.scene_points, options.arm_points}),
+        scene_(3 * options.scene_points),
+        arm_(3 * options.arm_points) {
+    choose_.sample = options.sample;
+    sampling_.n = net->config().points;
+    points_ = torch::empty({1, sampling_.n, 4});
+    proprio_ = torch::empty({1, sim::kProprioDim});
+  }
+
+  void Begin(uint64_t seed) { rng_ = core::Rng(seed, 0xe7a1); }
+
+  reality::OperatorInput Next(const reality::Observation& o) override {
+    reality::OperatorInput in;
+    if (oracle_ && robot_.QuerySuccess() == reality::SuccessAnswer::kSuccess) {
+      in.kind = reality::OperatorInput::Kind::kDone;
+      return in;
+    }
+    if (o.frames.empty()) throw core::Error("the robot sent an observation without a camera frame");
+    torch::NoGradGuard no_grad;
+    cloud_.Make(o, o.frames.front(), rng_, scene_.data(), arm_.data());
+    learn::SamplePoints(scene_.data(), int(scene_.size() / 3), arm_.data(), int(arm_.size() / 3),
+                        sampling_, false, rng_, points_.data_ptr<float>());
+    sim::MakeProprio(o.ee, 0.5 * o.gripper_width, 0.5 * o.gripper_width,
+                     proprio_.data_ptr<float>());
+    in.kind = reality::OperatorInput::Kind::kAction;
+    in.action = learn::ChooseAction(net_, net_->forward(points_, proprio_), choose_, rng_);
+    return in;
+  }
+  std::string name() const override { return "policy"; }
+
+ private:
+  reality::Robot& robot_;
+  learn::PolicyNet& net_;
+  bool oracle_;
+  reality::FrameCloud cloud_;
+  std::vector<float> scene_, arm_;
+  learn::PolicyEvalOptions choose_;
+  learn::PointSampling sampling_;
+  torch::Tensor points_, proprio_;
+  core::Rng rng_{0};
+};
+
+nlohmann::json ToJson(const TrialRecord& t) {
+  return {{"level", t.level},     {"trial", t.trial}, {"seed", t.seed},
+          {"success", t.success}, {"steps", t.steps}, {"seconds", t.seconds}};
+}
+
+}  // namespace
+
+RealityEvalReport EvaluateOnReality(reality::Robot& robot, const std::filesystem::path& policy,
+                                    const sim::TaskSpec& task, const RealityEvalOptions& options,
+                                    const std::filesystem::path& log, const SuccessJudge& judge,
+                                    core::Progress* progress) {
+  const auto start = core::Clock::now();
+  if (options.trials <= 0 || options.levels.empty())
+    throw core::ConfigError("eval", "trials", "at least one trial at one level");
+  learn::PolicyNet net = learn::LoadPolicy(policy);
+  if (net->config().point_features == 0)
+    throw core::Error(policy.string() +
+                      ": a state policy needs the privileged state, which a robot does not have; "
+                      "distil it into a point-cloud policy first (`train distill`)");
+  sim::Task sim_task(task);
+  learn::CheckPolicyFitsTask(net->config(), sim_task, policy.string());
+  net->eval();
+  const reality::RobotInfo info = robot.Info();
+  if (!info.has_success_oracle && !judge)
+    throw core::Error(info.name + " cannot tell success by itself and no one was asked to judge");
+
+  // The log: a header naming the policy and protocol, then one line per trial.
+  const nlohmann::json header = {{"policy", policy.string()},
+                                 {"policy_hash", Fingerprint().AddFile(policy).Hex()},
+                                 {"task", task.name},
+                                 {"robot", info.name},
+                                 {"seed", options.seed},
+                                 {"sample", options.sample},
+                                 {"points", {options.scene_points, options.arm_points}}};
+  std::map<std::pair<int, int>, TrialRecord> done;
+  if (std::filesystem::exists(log) && std::filesystem::file_size(log) > 0) {
+    std::ifstream in(log);
+    std::string line;
+    std::getline(in, line);
+    nlohmann::json old = nlohmann::json::parse(line, nullptr, false);
+    if (old.is_discarded() || old.value("policy_hash", "") != header["policy_hash"] ||
+        old.value("task", "") != task.name || old.value("seed", uint64_t(0)) != options.seed ||
+        old.value("sample", !options.sample) != options.sample)
+      throw core::Error(log.string() +
+                        ": a trial log of another policy, task or protocol; give another --out or "
+                        "remove it");
+    for (int n = 2; std::getline(in, line); ++n) {
+      const nlohmann::json t = nlohmann::json::parse(line, nullptr, false);
+      if (t.is_discarded()) {
+        spdlog::warn("eval: {} line {} is cut short (a killed run); that trial runs again",
+                     log.string(), n);
+        break;
+      }
+      TrialRecord r{t.at("level"),   t.at("trial"), t.at("seed"),
+                    t.at("success"), t.at("steps"), t.at("seconds")};
+      done[{r.level, r.trial}] = r;
+    }
+  } else {
+    if (log.has_parent_path()) std::filesystem::create_directories(log.parent_path());
+    std::ofstream(log) << header.dump() << "\n";
+  }
+  std::ofstream out(log, std::ios::app);
+  if (!out) throw core::IoError("cannot write " + log.string());
+
+  PolicyOperator op(robot, net, task, options, info.has_success_oracle);
+  reality::ActionClient client(robot, task.control.limits);
+  RealityEvalReport report;
+  for (int level : options.levels) {
+    bool shown[2] = {false, false};  // a failure's frame, a success's frame
+    LevelResult result;
+    result.level = level;
+    for (int i = 0; i < options.trials; ++i) {
+      const auto it = done.find({level, i});
+      TrialRecord r;
+      if (it != done.end()) {
+        r = it->second;
+        ++report.resumed;
+      } else {
+        const auto trial_start = core::Clock::now();
+        r.level = level;
+        r.trial = i;
+        r.seed = core::MixSeed(options.seed, 1000 * uint64_t(level) + uint64_t(i));
+        reality::Observation o = robot.Reset({r.seed, level});
+        client.ResetGripper();
+        op.Begin(r.seed);
+        r.steps = reality::RunOperator(robot, op, client, o, task.horizon, true).actions;
+        const reality::SuccessAnswer answer = robot.QuerySuccess();
+        r.success = answer == reality::SuccessAnswer::kUnknown
+                        ? (judge ? judge(r) : false)
+                        : answer == reality::SuccessAnswer::kSuccess;
+        r.seconds = core::SecondsSince(trial_start);
+        if (!options.frames.empty() && !shown[r.success] && !o.frames.empty() &&
+            !o.frames.front().rgb.empty()) {
+          shown[r.success] = true;
+          const reality::RgbdFrame& f = o.frames.front();
+          std::filesystem::create_directories(options.frames);
+          core::WritePng(
+              options.frames / ("level" + std::to_string(level) + "_trial" + std::to_string(i) +
+                                (r.success ? "_success.png" : "_failure.png")),
+              {f.intrinsics.width, f.intrinsics.height, 3, 8, f.rgb});
+        }
+        out << ToJson(r).dump() << "\n" << std::flush;
+      }
+      ++result.trials;
+      result.successes += r.success;
+      report.trials.push_back(r);
+      if (progress)
+        progress->Advance(1, "level " + std::to_string(level) + ": " +
+                                 std::to_string(result.successes) + "/" +
+                                 std::to_string(result.trials));
+    }
+    result.rate = double(result.successes) / result.trials;
+    core::Rng rng(options.seed, 0xb007 + level);
+    std::tie(result.low, result.high) =
+        BootstrapInterval(result.successes, result.trials, options.bootstrap, rng);
+    spdlog::info("eval: level {}: {}/{} ({:.0f}%, 95% interval {:.0f}-{:.0f}%)", level,
+                 result.successes, result.trials, 100 * result.rate, 100 * result.low,
+                 100 * result.high);
+    report.levels.push_back(result);
+  }
+  report.seconds = core::SecondsSince(start);
+  return report;
+}
+
+}  // namespace twinforge::pipeline

@@ -1,0 +1,73 @@
+// A point-cloud policy on reality (a real robot or the proxy reality), RialTo's way: seeded
+// trials at each randomization level, actions through the bridge and the safety filter, success
+// from the robot's oracle (the proxy's) or else asked of the person at the robot, and a
+// bootstrapped 95% interval per level.
+//
+// Every trial is appended to a JSON-lines log as it ends. Its first line names the policy (by
+// content) and the protocol; running again with the same log resumes after the trials already in
+// it, and a log of another policy or protocol is refused by name.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "core/progress.h"
+#include "core/rng.h"
+#include "reality/robot.h"
+#include "sim/task.h"
+
+namespace twinforge::pipeline {
+
+struct RealityEvalOptions {
+  std::vector<int> levels = {1, 2, 3};
+  int trials = 50;          // per level
+  uint64_t seed = 5000;     // trial i at level L: reset seed MixSeed(seed, 1000 * L + i)
+  bool sample = false;      // sample the policy's moves (else the most likely)
+  int scene_points = 2048;  // as `demos record` stores them
+  int arm_points = 512;
+  int bootstrap = 2000;  // resamples for the interval
+  // If set: the camera's last frame of each level's first success and first failure, as
+  // PNG files named level<L>_trial<i>_<success|failure>.png.
+  std::filesystem::path frames;
+};
+
+struct TrialRecord {
+  int level = 0, trial = 0;
+  uint64_t seed = 0;
+  bool success = false;
+  int steps = 0;  // actions sent
+  double seconds = 0;
+};
+
+struct LevelResult {
+  int level = 0, trials = 0, successes = 0;
+  double rate = 0, low = 0, high = 0;  // bootstrapped 95% interval
+};
+
+struct RealityEvalReport {
+  std::vector<LevelResult> levels;
+  std::vector<TrialRecord> trials;
+  int resumed = 0;  // trials read back from the log rather than run
+  double seconds = 0;
+};
+
+// Percentile bootstrap of a success rate: the 2.5% and 97.5% quantiles of the rate over
+// `resamples` resamplings (with replacement) of the trials' outcomes.
+std::pair<double, double> BootstrapInterval(int successes, int trials, int resamples,
+                                            core::Rng& rng);
+
+// When the robot has no success oracle, `judge` is asked after each trial (a person at the
+// robot); without one such a robot is refused.
+using SuccessJudge = std::function<bool(const TrialRecord&)>;
+
+RealityEvalReport EvaluateOnReality(reality::Robot& robot, const std::filesystem::path& policy,
+                                    const sim::TaskSpec& task, const RealityEvalOptions& options,
+                                    const std::filesystem::path& log,
+                                    const SuccessJudge& judge = nullptr,
+                                    core::Progress* progress = nullptr);
+
+}  // namespace twinforge::pipeline
