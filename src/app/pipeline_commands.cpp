@@ -38,17 +38,6 @@ bool AskPerson(const pipeline::TrialRecord& t) {
   }
 }
 
-nlohmann::json ToJson(const pipeline::RealityEvalReport& r) {
-  nlohmann::json levels = nlohmann::json::array();
-  for (const auto& l : r.levels)
-    levels.push_back({{"level", l.level},
-                      {"trials", l.trials},
-                      {"successes", l.successes},
-                      {"success_rate", l.rate},
-                      {"interval_95", {l.low, l.high}}});
-  return {{"levels", levels}, {"resumed_trials", r.resumed}, {"seconds", r.seconds}};
-}
-
 void AddEval(CLI::App& parent, int& exit_code) {
   auto cli = std::make_shared<EvalCli>();
   auto* c = parent.add_subcommand(
@@ -78,7 +67,7 @@ void AddEval(CLI::App& parent, int& exit_code) {
         connection.robot(), cli->policy, task, cli->options, cli->out,
         ::isatty(STDIN_FILENO) ? pipeline::SuccessJudge(AskPerson) : nullptr, &progress);
     progress.Finish();
-    nlohmann::json report = ToJson(r);
+    nlohmann::json report = pipeline::ToJson(r);
     report["policy"] = cli->policy;
     report["task"] = task.name;
     report["reality"] = connection.address();

@@ -48,17 +48,6 @@ void WriteJson(const std::filesystem::path& path, const nlohmann::json& value) {
   });
 }
 
-nlohmann::json EvalJson(const RealityEvalReport& r, const std::string& policy) {
-  nlohmann::json levels = nlohmann::json::array();
-  for (const auto& l : r.levels)
-    levels.push_back({{"level", l.level},
-                      {"trials", l.trials},
-                      {"successes", l.successes},
-                      {"success_rate", l.rate},
-                      {"interval_95", {l.low, l.high}}});
-  return {{"policy", policy}, {"levels", levels}, {"seconds", r.seconds}};
-}
-
 int ReadSuccesses(const std::filesystem::path& report) {
   std::ifstream in(report);
   const nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
@@ -114,7 +103,11 @@ class Job {
             });
             progress.Finish();
           });
-    Stage("bc", Fingerprint().AddFile(run_ / "demos/real.hdf5").Add(std::to_string(o_.seed) + "/" + std::to_string(o_.bc_epochs)).Hex(),
+    Stage("bc",
+          Fingerprint()
+              .AddFile(run_ / "demos/real.hdf5")
+              .Add(std::to_string(o_.seed) + "/" + std::to_string(o_.bc_epochs))
+              .Hex(),
           {"policies/bc_real.pt"}, [&] {
             learn::BcOptions b;
             b.seed = o_.seed;
@@ -226,7 +219,7 @@ class Job {
                   EvaluateOnReality(Robot(), file, task_, e, run_ / ("eval/" + policy + ".jsonl"),
                                     nullptr, &progress);
               progress.Finish();
-              WriteJson(run_ / ("eval/" + policy + ".json"), EvalJson(r, policy));
+              WriteJson(run_ / ("eval/" + policy + ".json"), ToJson(r));
             });
     }
     Stage("report", Fingerprint().Add(NowUtc()).Hex(), {"eval/report.html"},

@@ -30,7 +30,7 @@ struct MainJobOptions {
   std::string token;
   reality::ScanOptions scan;
   int demos = 15;
-  int bc_epochs = 300;  // at most (early stopping)
+  int bc_epochs = 300;     // at most (early stopping)
   int inverse_demos = 12;  // sim demos to keep
   int inverse_attempts = 3000;
   double inverse_temperature = 0.5;

@@ -19,6 +19,17 @@
 
 namespace twinforge::pipeline {
 
+nlohmann::json ToJson(const RealityEvalReport& r) {
+  nlohmann::json levels = nlohmann::json::array();
+  for (const auto& l : r.levels)
+    levels.push_back({{"level", l.level},
+                      {"trials", l.trials},
+                      {"successes", l.successes},
+                      {"success_rate", l.rate},
+                      {"interval_95", {l.low, l.high}}});
+  return {{"levels", levels}, {"resumed_trials", r.resumed}, {"seconds", r.seconds}};
+}
+
 std::pair<double, double> BootstrapInterval(int successes, int trials, int resamples,
                                             core::Rng& rng) {
   if (trials <= 0) return {0.0, 0.0};

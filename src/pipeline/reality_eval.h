@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <functional>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <utility>
 #include <vector>
@@ -54,6 +55,9 @@ struct RealityEvalReport {
   int resumed = 0;  // trials read back from the log rather than run
   double seconds = 0;
 };
+
+// The per-level rates with their intervals, as the commands print and the report reads them.
+nlohmann::json ToJson(const RealityEvalReport& report);
 
 // Percentile bootstrap of a success rate: the 2.5% and 97.5% quantiles of the rate over
 // `resamples` resamplings (with replacement) of the trials' outcomes.
