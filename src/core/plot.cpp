@@ -10,13 +10,7 @@
 
 namespace twinforge::core {
 
-namespace {
-
-constexpr double kWidth = 420, kHeight = 300;
-constexpr double kLeft = 56, kRight = 12, kTop = 28, kBottom = 44;
-const char* const kColours[] = {"#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b"};
-
-std::string Escape(const std::string& text) {
+std::string EscapeXml(const std::string& text) {
   std::string out;
   for (char c : text) {
     if (c == '<')
@@ -30,6 +24,12 @@ std::string Escape(const std::string& text) {
   }
   return out;
 }
+
+namespace {
+
+constexpr double kWidth = 420, kHeight = 300;
+constexpr double kLeft = 56, kRight = 12, kTop = 28, kBottom = 44;
+const char* const kColours[] = {"#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b"};
 
 std::string Number(double v) {
   std::ostringstream s;
@@ -56,7 +56,7 @@ void Panel(std::ostream& svg, const PlotPanel& panel, double x0) {
   const auto X = [&](double x) { return x0 + kLeft + (x - xmin) / (xmax - xmin) * w; };
   const auto Y = [&](double y) { return kTop + (1 - (y - ymin) / (ymax - ymin)) * h; };
   svg << "<text x='" << x0 + kWidth / 2 << "' y='18' text-anchor='middle' font-weight='bold'>"
-      << Escape(panel.title) << "</text>\n";
+      << EscapeXml(panel.title) << "</text>\n";
   svg << "<rect x='" << x0 + kLeft << "' y='" << kTop << "' width='" << w << "' height='" << h
       << "' fill='none' stroke='#888'/>\n";
   for (int k = 0; k <= 4; ++k) {
@@ -69,9 +69,9 @@ void Panel(std::ostream& svg, const PlotPanel& panel, double x0) {
         << Y(yv) << "' stroke='#eee'/>\n";
   }
   svg << "<text x='" << x0 + kLeft + w / 2 << "' y='" << kHeight - 8 << "' text-anchor='middle'>"
-      << Escape(panel.x_label) << "</text>\n";
+      << EscapeXml(panel.x_label) << "</text>\n";
   svg << "<text transform='translate(" << x0 + 14 << "," << kTop + h / 2
-      << ") rotate(-90)' text-anchor='middle'>" << Escape(panel.y_label) << "</text>\n";
+      << ") rotate(-90)' text-anchor='middle'>" << EscapeXml(panel.y_label) << "</text>\n";
   for (std::size_t k = 0; k < panel.series.size(); ++k) {
     const PlotSeries& s = panel.series[k];
     const char* colour = kColours[k % std::size(kColours)];
@@ -84,7 +84,7 @@ void Panel(std::ostream& svg, const PlotPanel& panel, double x0) {
     }
     svg << "<path d='" << path << "' fill='none' stroke='" << colour << "' stroke-width='1.5'/>\n";
     svg << "<text x='" << x0 + kLeft + 6 << "' y='" << kTop + 14 + 14 * k << "' fill='" << colour
-        << "'>" << Escape(s.name) << "</text>\n";
+        << "'>" << EscapeXml(s.name) << "</text>\n";
   }
 }
 

@@ -18,6 +18,9 @@ struct PlotPanel {
   bool y_unit_range = false;  // y axis fixed to [0, 1] (success rates)
 };
 
+// `text` with <, > and & escaped, for SVG and HTML.
+std::string EscapeXml(const std::string& text);
+
 // Panels side by side in one SVG, written to a temporary name and renamed.
 void WriteSvgPlot(const std::filesystem::path& path, const std::vector<PlotPanel>& panels);
 

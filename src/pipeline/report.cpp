@@ -19,21 +19,6 @@ namespace twinforge::pipeline {
 
 namespace {
 
-std::string Escape(const std::string& text) {
-  std::string out;
-  for (char c : text) {
-    if (c == '<')
-      out += "&lt;";
-    else if (c == '>')
-      out += "&gt;";
-    else if (c == '&')
-      out += "&amp;";
-    else
-      out += c;
-  }
-  return out;
-}
-
 std::string ReadText(const std::filesystem::path& path) {
   std::ifstream in(path);
   std::stringstream s;
@@ -91,13 +76,15 @@ std::filesystem::path WriteReport(const std::filesystem::path& root) {
   const nlohmann::json config = ReadJson(root / "config.json");
   const nlohmann::json manifest = ReadJson(root / "manifest.json");
   const std::string task = config.is_object() ? config.value("task", "?") : "?";
-  h << "<!doctype html><html><head><meta charset='utf-8'><title>twinforge: " << Escape(task)
+  h << "<!doctype html><html><head><meta charset='utf-8'><title>twinforge: "
+    << core::EscapeXml(task)
     << "</title><style>body{font-family:sans-serif;max-width:1100px;margin:2em auto}"
        "table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:4px 10px;"
        "text-align:right}img{max-width:48%;margin:2px}</style></head><body>\n";
-  h << "<h1>twinforge run: " << Escape(task)
-    << "</h1>\n<p>Reality: " << Escape(config.is_object() ? config.value("reality", "?") : "?")
-    << ". Run directory: " << Escape(std::filesystem::absolute(root).string()) << ".</p>\n";
+  h << "<h1>twinforge run: " << core::EscapeXml(task) << "</h1>\n<p>Reality: "
+    << core::EscapeXml(config.is_object() ? config.value("reality", "?") : "?")
+    << ". Run directory: " << core::EscapeXml(std::filesystem::absolute(root).string())
+    << ".</p>\n";
 
   // Results first: what a user came for.
   h << "<h2>Success on reality (95% bootstrap intervals)</h2>\n<table><tr><th>policy</th>";
@@ -134,7 +121,7 @@ std::filesystem::path WriteReport(const std::filesystem::path& root) {
        "ray-cast from the same camera.</p>\n";
   const nlohmann::json build = ReadJson(root / "twin_build.json");
   if (build.is_object())
-    h << "<details><summary>twin build report</summary><pre>" << Escape(build.dump(2))
+    h << "<details><summary>twin build report</summary><pre>" << core::EscapeXml(build.dump(2))
       << "</pre></details>\n";
 
   h << "<h2>Learning</h2>\n";
@@ -174,7 +161,7 @@ std::filesystem::path WriteReport(const std::filesystem::path& root) {
     for (std::size_t i = 0; i < distill.size(); ++i) {
       h << "<tr>";
       for (const auto& cell : distill[i])
-        h << (i ? "<td>" : "<th>") << Escape(cell) << (i ? "</td>" : "</th>");
+        h << (i ? "<td>" : "<th>") << core::EscapeXml(cell) << (i ? "</td>" : "</th>");
       h << "</tr>";
     }
     h << "</table><p>student_success: the student's success in the twin after the stage.</p>\n";
@@ -193,7 +180,7 @@ std::filesystem::path WriteReport(const std::filesystem::path& root) {
     for (const auto& n : names) {
       h << "<figure style='display:inline-block;margin:4px'><img style='max-width:320px' "
            "src='frames/"
-        << p << "/" << n << "'><figcaption>" << Escape(n) << "</figcaption></figure>";
+        << p << "/" << n << "'><figcaption>" << core::EscapeXml(n) << "</figcaption></figure>";
       any = true;
     }
   }
@@ -202,9 +189,9 @@ std::filesystem::path WriteReport(const std::filesystem::path& root) {
   if (manifest.is_object() && manifest.contains("stages")) {
     h << "<h2>Stages</h2><table><tr><th>stage</th><th>minutes</th><th>finished</th></tr>";
     for (const auto& [name, s] : manifest["stages"].items())
-      h << "<tr><th>" << Escape(name) << "</th><td>" << std::fixed << std::setprecision(1)
-        << s.value("seconds", 0.0) / 60 << "</td><td>" << Escape(s.value("finished_at", ""))
-        << "</td></tr>";
+      h << "<tr><th>" << core::EscapeXml(name) << "</th><td>" << std::fixed << std::setprecision(1)
+        << s.value("seconds", 0.0) / 60 << "</td><td>"
+        << core::EscapeXml(s.value("finished_at", "")) << "</td></tr>";
     h << "</table>\n";
   }
   h << "</body></html>\n";
