@@ -13,12 +13,14 @@ namespace twinforge::core {
 namespace {
 std::mutex g_mutex;
 std::shared_ptr<spdlog::sinks::sink> g_file_sink;
+std::shared_ptr<spdlog::sinks::sink> g_console_sink;
 
 std::shared_ptr<spdlog::logger> Logger() {
   auto logger = spdlog::get("twinforge");
   if (!logger) {
     auto console = std::make_shared<spdlog::sinks::stderr_color_sink_mt>();
     console->set_pattern("[%H:%M:%S] %^%l%$ %v");
+    g_console_sink = console;
     logger = std::make_shared<spdlog::logger>("twinforge", console);
     spdlog::register_logger(logger);
     spdlog::set_default_logger(logger);
@@ -35,7 +37,9 @@ void SetupLogging(const std::string& level) {
     throw ConfigError(
         "", "log_level",
         "expected one of trace, debug, info, warn, error, critical, off; got \"" + level + "\"");
-  logger->set_level(parsed);
+  // The console shows `level`; a run's log file (AttachLogFile) keeps debug lines as well.
+  g_console_sink->set_level(parsed);
+  logger->set_level(g_file_sink ? std::min(parsed, spdlog::level::debug) : parsed);
   logger->flush_on(spdlog::level::warn);
 }
 
@@ -43,6 +47,8 @@ void AttachLogFile(const std::filesystem::path& path) {
   std::lock_guard lock(g_mutex);
   auto logger = Logger();
   EnsureDirectory(path.parent_path());
+  // The console keeps the level it had; only the logger lets debug lines through to the file.
+  if (!g_file_sink) g_console_sink->set_level(logger->level());
   if (g_file_sink) {
     auto& sinks = logger->sinks();
     sinks.erase(std::remove(sinks.begin(), sinks.end(), g_file_sink), sinks.end());
@@ -66,6 +72,7 @@ void DetachLogFile() {
   auto& sinks = logger->sinks();
   sinks.erase(std::remove(sinks.begin(), sinks.end(), g_file_sink), sinks.end());
   g_file_sink.reset();
+  logger->set_level(g_console_sink->level());
 }
 
 }  // namespace twinforge::core

@@ -1,5 +1,7 @@
 #include "learn/distill.h"
 
+#include <Eigen/Geometry>
+#include <cmath>
 #include <fstream>
 
 #include "core/dataset.h"
@@ -53,6 +55,30 @@ std::vector<std::pair<int, std::size_t>> PlanBatch(const std::vector<const Disti
       rows.emplace_back(filled[i], static_cast<std::size_t>(rng.Index(source.size())));
   }
   return rows;
+}
+
+void PerturbScene(float* points, int n, double shift, double tilt_deg, core::Rng& rng) {
+  if (shift <= 0 && tilt_deg <= 0) return;
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  int count = 0;
+  for (int i = 0; i < n; ++i)
+    if (points[4 * i + 3] == 0.f) {
+      centroid += Eigen::Vector3d(points[4 * i], points[4 * i + 1], points[4 * i + 2]);
+      ++count;
+    }
+  if (count == 0) return;
+  centroid /= count;
+  Eigen::Vector3d axis(rng.Normal(), rng.Normal(), rng.Normal());
+  if (axis.norm() < 1e-9) axis = Eigen::Vector3d::UnitZ();
+  const double angle = rng.Normal() * tilt_deg * M_PI / 180;
+  const Eigen::Matrix3d R = Eigen::AngleAxisd(angle, axis.normalized()).toRotationMatrix();
+  const Eigen::Vector3d t(rng.Normal() * shift, rng.Normal() * shift, rng.Normal() * shift);
+  for (int i = 0; i < n; ++i) {
+    if (points[4 * i + 3] != 0.f) continue;
+    Eigen::Vector3d p(points[4 * i], points[4 * i + 1], points[4 * i + 2]);
+    p = R * (p - centroid) + centroid + t;
+    for (int k = 0; k < 3; ++k) points[4 * i + k] = static_cast<float>(p[k]);
+  }
 }
 
 DistillSource LoadDemoSource(const std::filesystem::path& demos) {
@@ -205,8 +231,9 @@ struct Batch {
 };
 
 Batch MakeBatch(const std::vector<const DistillSource*>& sources,
-                const std::vector<std::pair<int, std::size_t>>& rows, const PointSampling& sampling,
+                const std::vector<std::pair<int, std::size_t>>& rows, const DistillOptions& o,
                 int proprio_dim, int target_dim, core::Rng& rng) {
+  const PointSampling& sampling = o.sampling;
   const auto B = static_cast<int64_t>(rows.size());
   Batch b{torch::empty({B, sampling.n, 4}), torch::empty({B, proprio_dim}),
           torch::empty({B, target_dim})};
@@ -215,6 +242,7 @@ Batch MakeBatch(const std::vector<const DistillSource*>& sources,
     const std::size_t t = rows[i].second;
     SamplePoints(s.scene.data() + 3 * s.scene_n * t, s.scene_n, s.arm.data() + 3 * s.arm_n * t,
                  s.arm_n, sampling, true, rng, b.points[i].data_ptr<float>());
+    PerturbScene(b.points[i].data_ptr<float>(), sampling.n, o.scene_shift, o.scene_tilt_deg, rng);
     std::copy_n(s.proprio.data() + proprio_dim * t, proprio_dim, b.proprio[i].data_ptr<float>());
     std::copy_n(s.target.data() + target_dim * t, target_dim, b.targets[i].data_ptr<float>());
   }
@@ -324,7 +352,7 @@ DistillReport TrainDistill(const std::filesystem::path& teacher_path,
     double recent = 0;
     int recent_n = 0;
     for (int step = 0; step < options.train_steps; ++step) {
-      const Batch b = MakeBatch(from, PlanBatch(from, options.batch, rng), options.sampling,
+      const Batch b = MakeBatch(from, PlanBatch(from, options.batch, rng), options,
                                 config.proprio_dim, config.action_dim, rng);
       const torch::Tensor loss =
           DistillLoss(student, student->forward(b.points, b.proprio), b.targets);

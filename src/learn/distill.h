@@ -49,6 +49,12 @@ struct DistillOptions {
   double learning_rate = 1e-3;
   double grad_clip = 5.0;
   PointSampling sampling;  // the student's points and their augmentation
+  // Camera-pose augmentation: each training sample's scene points (not the arm's, which come
+  // from forward kinematics on the robot too) moved rigidly, as a camera a little off its
+  // calibration would see them. Shift: per axis, standard deviation in m; tilt: about a random
+  // axis through the points' centroid, standard deviation in degrees. 0: off.
+  double scene_shift = 0.015;
+  double scene_tilt_deg = 1.5;
   int hidden = 256;
   int scene_points = 1024, arm_points = 256;  // kept per step of the sim sources
   int eval_episodes = 50;                     // the student in the twin after each stage; 0: none
@@ -70,6 +76,8 @@ struct DistillOptions {
     a("learning_rate", learning_rate);
     a("grad_clip", grad_clip);
     a("hidden", hidden);
+    a("scene_shift", scene_shift);
+    a("scene_tilt_deg", scene_tilt_deg);
     a("scene_points", scene_points);
     a("arm_points", arm_points);
     a("eval_episodes", eval_episodes);
@@ -101,6 +109,11 @@ struct DistillSource {
 // equal shares (a remainder of r rows goes one each to the first r sources), as (source, row).
 std::vector<std::pair<int, std::size_t>> PlanBatch(const std::vector<const DistillSource*>& sources,
                                                    int batch, core::Rng& rng);
+
+// Moves the scene points (rows of x, y, z, is_arm with is_arm 0) of one sample rigidly: a
+// rotation of N(0, tilt_deg) degrees about a random axis through their centroid, then a shift of
+// N(0, shift) m per axis. The arm's points stay.
+void PerturbScene(float* points, int n, double shift, double tilt_deg, core::Rng& rng);
 
 // The real demos (`demos record` layout) as a source: one-hot targets for discrete moves.
 DistillSource LoadDemoSource(const std::filesystem::path& demos);

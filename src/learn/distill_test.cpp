@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Core>
+
 #include "core/dataset.h"
 #include "core/error.h"
 #include "core/test_support.h"
@@ -66,6 +68,37 @@ TEST(Distill, CoTrainingBatchesHoldEqualSharesOfEverySource) {
   }
   const DistillSource empty = Filled("x", 0);
   EXPECT_THROW(PlanBatch({&empty}, 8, rng), core::Error);
+}
+
+// The camera-pose augmentation moves the scene's points rigidly and leaves the arm's.
+TEST(Distill, CameraPoseAugmentationMovesOnlyTheScenePointsRigidly) {
+  core::Rng rng(2);
+  std::vector<float> points;
+  for (int i = 0; i < 40; ++i) {
+    points.insert(points.end(), {float(rng.Uniform()), float(rng.Uniform()), float(rng.Uniform()),
+                                 i % 4 == 0 ? 1.f : 0.f});
+  }
+  std::vector<float> moved = points;
+  PerturbScene(moved.data(), 40, 0.01, 2.0, rng);
+  const auto at = [](const std::vector<float>& p, int i) {
+    return Eigen::Vector3d(p[4 * i], p[4 * i + 1], p[4 * i + 2]);
+  };
+  double largest = 0;
+  for (int i = 0; i < 40; ++i) {
+    if (i % 4 == 0) {
+      EXPECT_EQ(at(moved, i), at(points, i)) << "arm point " << i;
+      continue;
+    }
+    largest = std::max(largest, (at(moved, i) - at(points, i)).norm());
+    for (int j = 1; j < i; ++j)  // distances between scene points are kept
+      if (j % 4 != 0)
+        EXPECT_NEAR((at(moved, i) - at(moved, j)).norm(), (at(points, i) - at(points, j)).norm(),
+                    1e-5);
+  }
+  EXPECT_GT(largest, 1e-3);
+  std::vector<float> same = points;
+  PerturbScene(same.data(), 40, 0, 0, rng);
+  EXPECT_EQ(same, points);
 }
 
 // In DAgger the student's move is sent and the teacher's distribution is stored as the label; in
