@@ -7,6 +7,7 @@
 
 #include "core/config.h"
 #include "core/error.h"
+#include "core/fs.h"
 #include "core/log.h"
 #include "core/measure.h"
 #include "learn/bc.h"
@@ -23,13 +24,6 @@ namespace twinforge::pipeline {
 
 namespace {
 
-std::string NowUtc() {
-  const std::time_t t = std::time(nullptr);
-  char text[32];
-  std::strftime(text, sizeof text, "%Y-%m-%dT%H:%M:%SZ", std::gmtime(&t));
-  return text;
-}
-
 // Writes through `part` and renames to `path` once `write` finished, so a killed stage never
 // leaves a file that looks complete.
 void WriteThenRename(const std::filesystem::path& path,
@@ -42,10 +36,7 @@ void WriteThenRename(const std::filesystem::path& path,
 }
 
 void WriteJson(const std::filesystem::path& path, const nlohmann::json& value) {
-  std::filesystem::create_directories(path.parent_path());
-  WriteThenRename(path, [&](const std::filesystem::path& part) {
-    std::ofstream(part) << value.dump(2) << "\n";
-  });
+  core::WriteFileAtomic(path, value.dump(2) + "\n");
 }
 
 int ReadSuccesses(const std::filesystem::path& report) {
@@ -222,8 +213,9 @@ class Job {
               WriteJson(run_ / ("eval/" + policy + ".json"), ToJson(r));
             });
     }
-    Stage("report", Fingerprint().Add(NowUtc()).Hex(), {"eval/report.html"},
-          [&] { WriteReport(run_.root()); });
+    // The report reads whatever the run holds now: it is written every time.
+    Stage("report", Fingerprint().Add(std::to_string(std::time(nullptr))).Hex(),
+          {"eval/report.html"}, [&] { WriteReport(run_.root()); });
     spdlog::info("run: done in {:.0f} min; report {}", TotalMinutes(),
                  (run_ / "eval/report.html").string());
   }

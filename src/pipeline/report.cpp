@@ -6,6 +6,7 @@
 #include <sstream>
 
 #include "core/error.h"
+#include "core/fs.h"
 #include "core/image.h"
 #include "core/log.h"
 #include "core/plot.h"
@@ -19,16 +20,9 @@ namespace twinforge::pipeline {
 
 namespace {
 
-std::string ReadText(const std::filesystem::path& path) {
-  std::ifstream in(path);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
 nlohmann::json ReadJson(const std::filesystem::path& path) {
   if (!std::filesystem::exists(path)) return nullptr;
-  nlohmann::json j = nlohmann::json::parse(ReadText(path), nullptr, false);
+  nlohmann::json j = nlohmann::json::parse(core::ReadTextFile(path), nullptr, false);
   return j.is_discarded() ? nlohmann::json(nullptr) : j;
 }
 
@@ -153,7 +147,7 @@ std::filesystem::path WriteReport(const std::filesystem::path& root) {
         << t["env_steps"].get<int64_t>() << " env steps, "
         << int(std::lround(t["seconds"].get<double>() / 60)) << " min (stopped by "
         << t["stopped_by"].get<std::string>() << ").</p>";
-    h << ReadText(root / "policies/teacher.curve.svg") << "\n";
+    h << core::ReadTextFile(root / "policies/teacher.curve.svg") << "\n";
   }
   const auto distill = ReadCsv(root / "policies/student.curve.csv");
   if (distill.size() > 1) {
@@ -196,9 +190,7 @@ std::filesystem::path WriteReport(const std::filesystem::path& root) {
   }
   h << "</body></html>\n";
   const auto out = dir / "report.html";
-  const auto part = dir / "report.html.part";
-  std::ofstream(part) << h.str();
-  std::filesystem::rename(part, out);
+  core::WriteFileAtomic(out, h.str());
   spdlog::info("report: {}", out.string());
   return out;
 }
