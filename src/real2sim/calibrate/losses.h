@@ -1,0 +1,36 @@
+// Losses that compare a soft rendering (soft_render.h) or a point cloud with what a real camera
+// saw. All take and return double tensors and are differentiable in their first argument(s).
+//
+// Includes <torch/torch.h>: include it only from the calibrate module's .cpp files and tests.
+#pragma once
+
+#include <torch/torch.h>
+
+namespace twinforge::real2sim {
+
+// Mean absolute colour difference over `mask` ([H, W] 0/1: the segmented region), each pixel
+// weighted by the rendered silhouette. rgb and target are [H, W, 3] in [0, 1].
+torch::Tensor RgbLoss(const torch::Tensor& rgb, const torch::Tensor& silhouette,
+                      const torch::Tensor& target, const torch::Tensor& mask);
+
+// Mean Huber depth error (m, Huber width `delta`) over pixels where the target has a return, the
+// rendering covers the pixel (silhouette > 0.5) and the two are within `outlier` of each other
+// (farther apart is something the twin does not have: a person, a cable).
+torch::Tensor DepthLoss(const torch::Tensor& depth, const torch::Tensor& silhouette,
+                        const torch::Tensor& target, double delta = 0.01, double outlier = 0.05);
+
+// 1 - soft intersection over union of a rendered silhouette and a target mask ([H, W] in [0, 1]).
+torch::Tensor SilhouetteLoss(const torch::Tensor& silhouette, const torch::Tensor& target);
+
+// Symmetric Chamfer distance: the mean distance from each point of `a` [N, 3] to its nearest in
+// `b` [M, 3], plus the same from b to a.
+torch::Tensor ChamferDistance(const torch::Tensor& a, const torch::Tensor& b);
+
+// Earth Mover's Distance between two clouds with equal weights per point (1/N and 1/M), with
+// entropic regularization `epsilon` (m) solved by log-domain Sinkhorn iterations: the transport
+// plan's cost sum P_ij |a_i - b_j|. The plan is found without gradients; the gradient is that of
+// the cost at the plan (the envelope theorem), which is exact at convergence.
+torch::Tensor SinkhornEmd(const torch::Tensor& a, const torch::Tensor& b, double epsilon = 0.002,
+                          int iterations = 200);
+
+}  // namespace twinforge::real2sim
