@@ -40,6 +40,16 @@ struct ScanCli {
   reality::ScanOptions scan;
 };
 
+struct CameraFramesCli {
+  RealityCli reality;
+  std::string task = "open_drawer";
+  std::string out;
+  int count = 6;
+  double spread = 0.12;
+  double height = 0.15;
+  uint64_t seed = 1;
+};
+
 // `auto`: the robot's own operator if it has one, else a person at this terminal.
 
 }  // namespace
@@ -157,6 +167,39 @@ void AddDataCommands(CLI::App& parent, int& exit_code) {
                                 {"source", result.source}}
                      .dump(2)
               << "\n";
+    exit_code = 0;
+  });
+
+  auto camera_cli = std::make_shared<CameraFramesCli>();
+  auto* camera = scan->add_subcommand(
+      "camera",
+      "frames of the robot's fixed camera with the arm in a few poses, for `twinforge calibrate`");
+  camera_cli->reality.Add(camera);
+  camera->add_option("--task", camera_cli->task, "task (its robot's home pose)");
+  camera->add_option("--out", camera_cli->out, "directory to write (scan layout)")->required();
+  camera->add_option("--count", camera_cli->count, "frames")->check(CLI::Range(1, 100));
+  camera
+      ->add_option(
+          "--spread", camera_cli->spread,
+          "m around the point `--height` above where the camera looks, the tool is held in")
+      ->check(CLI::Range(0.0, 0.3));
+  camera->add_option("--height", camera_cli->height, "m above where the camera looks")
+      ->check(CLI::Range(0.05, 0.6));
+  camera->add_option("--seed", camera_cli->seed, "seed of the arm poses");
+  camera->callback([camera_cli, &exit_code] {
+    auto& o = *camera_cli;
+    const sim::TaskSpec task = sim::LoadTaskSpec(o.task);
+    reality::RealityConnection connection(o.reality.Options());
+    const sim::RobotSpec robot =
+        sim::LoadRobotSpec(reality::RobotDescriptionPath(connection.robot().Info().robot));
+    core::Progress progress("camera frames", o.count, "frames");
+    const Eigen::Vector3d centre =
+        Eigen::Vector3d(task.camera.look_at.data()) + Eigen::Vector3d(0, 0, o.height);
+    const core::Scan result =
+        reality::CaptureCameraFrames(connection.robot(), sim::Kinematics(robot), centre, o.count,
+                                     o.spread, o.seed, o.out, &progress);
+    progress.Finish();
+    std::cout << nlohmann::json{{"out", o.out}, {"frames", result.frames.size()}}.dump(2) << "\n";
     exit_code = 0;
   });
 }

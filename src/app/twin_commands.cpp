@@ -3,8 +3,10 @@
 #include <iostream>
 #include <memory>
 
+#include "core/log.h"
 #include "pipeline/twin_score.h"
 #include "real2sim/build.h"
+#include "real2sim/calibrate/calibrate.h"
 #include "reality/proxy_reality.h"
 
 namespace twinforge::app {
@@ -14,6 +16,11 @@ namespace {
 struct BuildCli {
   std::string scan, out, spec, scan_after, task;
   real2sim::BuildOptions options;
+};
+
+struct CalibrateCli {
+  std::string twin, frames, out, config;
+  real2sim::CalibrateOptions options;
 };
 
 struct ScoreCli {
@@ -74,6 +81,42 @@ void AddTwinCommands(CLI::App& parent, int& exit_code) {
     const auto result = pipeline::ScoreTwin(
         score_cli->twin, reality::ResolveWorldDir(score_cli->world), score_cli->options);
     std::cout << result.ToJson().dump(2) << "\n";
+    exit_code = 0;
+  });
+
+  auto calibrate_cli = std::make_shared<CalibrateCli>();
+  auto* calibrate = parent.add_subcommand(
+      "calibrate",
+      "find where the robot's camera really is by rendering the twin (differentiable) against "
+      "its frames; writes the twin with the camera corrected");
+  calibrate->add_option("--twin", calibrate_cli->twin, "twin directory (twin build --out)")
+      ->required()
+      ->check(CLI::ExistingDirectory);
+  calibrate
+      ->add_option("--frames", calibrate_cli->frames,
+                   "frames of the camera (scan camera --out, or any scan-layout directory)")
+      ->required()
+      ->check(CLI::ExistingDirectory);
+  calibrate->add_option("--out", calibrate_cli->out, "refined twin directory to write")->required();
+  calibrate->add_option("--config", calibrate_cli->config, "calibration options (JSON/YAML)")
+      ->check(CLI::ExistingFile);
+  calibrate->add_option("--iterations", calibrate_cli->options.iterations, "Adam steps")
+      ->check(CLI::PositiveNumber);
+  calibrate->callback([calibrate_cli, calibrate, &exit_code] {
+    auto& o = *calibrate_cli;
+    if (!o.config.empty()) {
+      const int iterations = o.options.iterations;
+      o.options = core::LoadConfig<real2sim::CalibrateOptions>(o.config);
+      if (calibrate->count("--iterations")) o.options.iterations = iterations;
+    }
+    const sim::TaskSpec twin_task =
+        sim::LoadTaskSpec((o.twin / std::filesystem::path("task.yaml")).string());
+    const core::Scan frames = core::ReadScan(o.frames);
+    core::Progress progress("calibrate", o.options.iterations, "steps");
+    const auto result = real2sim::CalibrateCamera(twin_task, frames, o.options, &progress);
+    progress.Finish();
+    real2sim::WriteCalibratedTwin(o.twin, frames, result, o.options, o.out);
+    std::cout << real2sim::ToJson(result).dump(2) << "\n";
     exit_code = 0;
   });
 }

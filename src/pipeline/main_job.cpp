@@ -54,12 +54,30 @@ class Job {
     core::SaveConfig(run_ / "config.json", o_);
     const bool articulated = !task_.joints.empty();
     const std::string reality = Fingerprint().Add(o_.reality).Add(task_.name).Hex();
-    Stage("scan", Fingerprint().Add(reality).Add(core::ToJson(o_.scan).dump()).Hex(),
-          articulated
-              ? std::vector<std::string>{"scan/trajectory.json", "scan_open/trajectory.json"}
-              : std::vector<std::string>{"scan/trajectory.json"},
-          [&] {
+    std::vector<std::string> scans = {"scan/trajectory.json"};
+    if (o_.camera_frames > 0) scans.push_back("camera/frames.json");
+    if (articulated) scans.push_back("scan_open/trajectory.json");
+    Stage("scan",
+          Fingerprint()
+              .Add(reality)
+              .Add(core::ToJson(o_.scan).dump())
+              .Add(std::to_string(o_.camera_frames))
+              .Hex(),
+          scans, [&] {
             Scan(run_ / "scan", false);
+            // The fixed camera sees the scene as it was scanned (before the part is moved).
+            if (o_.camera_frames > 0) {
+              std::filesystem::remove_all(run_ / "camera");
+              reality::Robot& robot = Robot();
+              const sim::Kinematics kinematics(
+                  sim::LoadRobotSpec(reality::RobotDescriptionPath(robot.Info().robot)));
+              core::Progress progress("camera frames", o_.camera_frames, "frames");
+              reality::CaptureCameraFrames(
+                  robot, kinematics,
+                  Eigen::Vector3d(task_.camera.look_at.data()) + Eigen::Vector3d(0, 0, 0.15),
+                  o_.camera_frames, 0.12, o_.seed, run_ / "camera", &progress);
+              progress.Finish();
+            }
             if (articulated) Scan(run_ / "scan_open", true);
           });
     Stage("twin",
@@ -76,7 +94,32 @@ class Job {
             WriteJson(run_ / "twin_build.json",
                       real2sim::BuildTwin(run_ / "scan", run_ / "twin", b));
           });
-    Stage("demos", Fingerprint().Add(reality).Add(std::to_string(o_.demos)).Hex(),
+    // Where the fixed camera really is: the twin rendered against its frames.
+    const std::filesystem::path twin = o_.camera_frames > 0 ? run_ / "calibrated" : run_ / "twin";
+    if (o_.camera_frames > 0) {
+      Stage("calibrate",
+            Fingerprint()
+                .AddFile(run_ / "twin/task.yaml")
+                .AddFile(run_ / "twin/scene.xml")
+                .AddFile(run_ / "camera/frames.json")
+                .Add(core::ToJson(o_.calibrate).dump())
+                .Hex(),
+            {"calibrated/task.yaml", "calibrated/calibration/calibration.json"}, [&] {
+              const core::Scan frames = core::ReadScan(run_ / "camera");
+              core::Progress progress("calibrate", o_.calibrate.iterations, "steps");
+              const auto c =
+                  real2sim::CalibrateCamera(sim::LoadTaskSpec((run_ / "twin/task.yaml").string()),
+                                            frames, o_.calibrate, &progress);
+              progress.Finish();
+              std::filesystem::remove_all(run_ / "calibrated");
+              real2sim::WriteCalibratedTwin(run_ / "twin", frames, c, o_.calibrate,
+                                            run_ / "calibrated");
+            });
+      // Real frames become clouds with the calibrated camera, in the demos and the evaluations.
+      task_.camera = sim::LoadTaskSpec((twin / "task.yaml").string()).camera;
+    }
+    const std::string camera = core::ToJson(task_.camera).dump();
+    Stage("demos", Fingerprint().Add(reality).Add(camera).Add(std::to_string(o_.demos)).Hex(),
           {"demos/real.hdf5"}, [&] {
             reality::Robot& robot = Robot();
             const auto op = reality::MakeOperator(robot, "auto", task_);
@@ -112,9 +155,9 @@ class Job {
                                                        {"seconds", r.seconds}});
           });
     auto twin_task =
-        std::make_shared<const sim::Task>(sim::LoadTaskSpec((run_ / "twin/task.yaml").string()));
+        std::make_shared<const sim::Task>(sim::LoadTaskSpec((twin / "task.yaml").string()));
     const std::string twin_hash =
-        Fingerprint().AddFile(run_ / "twin/task.yaml").AddFile(run_ / "twin/scene.xml").Hex();
+        Fingerprint().AddFile(twin / "task.yaml").AddFile(twin / "scene.xml").Hex();
     Stage(
         "inverse_distill",
         Fingerprint()
@@ -199,6 +242,7 @@ class Job {
       Stage("eval_" + policy,
             Fingerprint()
                 .Add(reality)
+                .Add(camera)
                 .AddFile(file)
                 .Add(std::to_string(e.trials) + "/" + std::to_string(e.seed))
                 .Add(core::ToJson(o_.levels).dump())
@@ -221,16 +265,14 @@ class Job {
   }
 
  private:
-  static constexpr int kStages = 10;
-
   void Stage(const std::string& name, const std::string& inputs,
              const std::vector<std::string>& outputs, const std::function<void()>& body) {
     ++index_;
     if (run_.UpToDate(name, inputs)) {
-      spdlog::info("run: stage {}/{} {}: up to date", index_, kStages, name);
+      spdlog::info("run: stage {}/{} {}: up to date", index_, stages_, name);
       return;
     }
-    spdlog::info("run: stage {}/{} {} ({:.1f} min into this session)", index_, kStages, name,
+    spdlog::info("run: stage {}/{} {} ({:.1f} min into this session)", index_, stages_, name,
                  TotalMinutes());
     const auto start = core::Clock::now();
     try {
@@ -271,6 +313,7 @@ class Job {
   }
 
   MainJobOptions o_;
+  int stages_ = o_.camera_frames > 0 ? 11 : 10;
   RunDirectory run_;
   sim::TaskSpec task_;
   std::unique_ptr<reality::RealityConnection> connection_;

@@ -1,7 +1,10 @@
 // The main job: every stage from the scan to the evaluated student, in one run directory.
 //
 //   runs/NAME/scan/, scan_open/     RGB-D scans (the second after the operator moved the part)
+//   runs/NAME/camera/               frames of the fixed camera, taken with the scene as scanned
 //   runs/NAME/twin/                 the articulated twin and its task.yaml
+//   runs/NAME/calibrated/           the twin with the camera where calibration found it (every
+//                                   later stage uses this twin and this camera)
 //   runs/NAME/demos/real.hdf5       teleoperated demos on reality
 //   runs/NAME/policies/bc_real.pt   BC on them
 //   runs/NAME/demos/sim.hdf5        inverse distillation's successes in the twin
@@ -20,6 +23,7 @@
 #include <vector>
 
 #include "learn/distill.h"
+#include "real2sim/calibrate/calibrate.h"
 #include "reality/scan.h"
 
 namespace twinforge::pipeline {
@@ -29,6 +33,8 @@ struct MainJobOptions {
   std::string reality;               // address (tcp://host:port or proxy:WORLD)
   std::string token;
   reality::ScanOptions scan;
+  int camera_frames = 6;  // of the fixed camera, to calibrate its pose (0: no calibration)
+  real2sim::CalibrateOptions calibrate;
   int demos = 15;
   int bc_epochs = 300;     // at most (early stopping)
   int inverse_demos = 12;  // sim demos to keep
@@ -48,6 +54,8 @@ struct MainJobOptions {
     a("task", task);
     a("reality", reality);
     a("scan", scan);
+    a("camera_frames", camera_frames);
+    a("calibrate", calibrate);
     a("demos", demos);
     a("bc_epochs", bc_epochs);
     a("inverse_demos", inverse_demos);
@@ -64,6 +72,7 @@ struct MainJobOptions {
     a("seed", seed);
     a.Require(demos > 0 && inverse_demos > 0 && inverse_attempts > 0 && trials > 0, "demos",
               "positive demo, attempt and trial counts");
+    a.Require(camera_frames >= 0, "camera_frames", "a non-negative frame count");
     a.Require(rl_envs > 0 && threads > 0, "threads", "positive env and thread counts");
   }
 };

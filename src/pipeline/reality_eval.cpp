@@ -59,7 +59,8 @@ class PolicyOperator : public reality::Operator {
         net_(net),
         oracle_(oracle),
         cloud_(sim::LoadRobotSpec(reality::RobotDescriptionPath(robot.Info().robot)),
-               task.workspace, {options.scene_points, options.arm_points}),
+               task.workspace, {options.scene_points, options.arm_points},
+               sim::CorrectionPose(task.camera.correction)),
         scene_(3 * options.scene_points),
         arm_(3 * options.arm_points) {
     choose_.sample = options.sample;

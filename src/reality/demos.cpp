@@ -77,7 +77,8 @@ RecordReport RecordDemos(Robot& robot, Operator& op, const sim::TaskSpec& task,
   const auto start = std::chrono::steady_clock::now();
   const RobotInfo info = robot.Info();
   const sim::RobotSpec robot_spec = sim::LoadRobotSpec(RobotDescriptionPath(info.robot));
-  FrameCloud cloud(robot_spec, task.workspace, options.cloud);
+  FrameCloud cloud(robot_spec, task.workspace, options.cloud,
+                   sim::CorrectionPose(task.camera.correction));
   ActionClient client(robot, task.control.limits);
   const nlohmann::json env_args = {
       {"env_name", task.name},
@@ -106,14 +107,13 @@ RecordReport RecordDemos(Robot& robot, Operator& op, const sim::TaskSpec& task,
     client.ResetGripper();
     core::Rng cloud_rng(seed, 0xc10d);
     DemoBuffer demo;
-    const OperatorRun run =
-        RunOperator(robot, op, client, o, max_steps, true,
-                    [&](const Observation& seen, const sim::Action& action) {
-                      if (seen.frames.empty())
-                        throw core::Error(info.name +
-                                          " sent an observation without a camera frame");
-                      demo.Add(seen, action, cloud, cloud_rng);
-                    });
+    const OperatorRun run = RunOperator(
+        robot, op, client, o, max_steps, true,
+        [&](const Observation& seen, const sim::Action& action) {
+          if (seen.frames.empty())
+            throw core::Error(info.name + " sent an observation without a camera frame");
+          demo.Add(seen, action, cloud, cloud_rng);
+        });
     report.steps += static_cast<long>(demo.steps);
     report.operator_seconds += run.seconds;
     if (run.quit) {

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <numeric>
 
 #include "core/test_support.h"
 #include "reality/test_support.h"
@@ -139,6 +140,42 @@ TEST(FrameCloud, CutsTheArmOutOfTheDepth) {
   EXPECT_GE(removed, before);
   EXPECT_LT(after, before / 5);
   EXPECT_LT(near_arm(scene.data(), 4000), 4000 / 50);
+}
+
+// The drawer world's camera sits off its reported mount. With the mount's true error as the
+// camera correction (what `twinforge calibrate` estimates), the table comes out flat: its points'
+// heights spread by the sensor's noise, not by a tilted camera.
+TEST(FrameCloud, TheCameraCorrectionPutsTheTableFlat) {
+  ProxyReality proxy(ResolveWorldDir("open_drawer"));
+  const sim::TaskSpec task = sim::LoadTaskSpec("open_drawer");
+  const WorldSpec& world = proxy.spec();
+  const core::Pose truth{Eigen::Vector3d(world.camera_offset.data()),
+                         core::FromRollPitchYaw(world.camera_rotation[0], world.camera_rotation[1],
+                                                world.camera_rotation[2])};
+  const Observation o = proxy.Observe(false);
+  const RgbdFrame frame = proxy.Frame();
+  FrameCloud::Options options;
+  options.scene_points = 3000;
+  options.arm_points = 16;
+  sim::WorkspaceSpec with_table = task.workspace;  // the task's crops the table away
+  with_table.min[2] = -0.1;
+  auto table_spread = [&](const core::Pose& correction) {
+    FrameCloud cloud(sim::LoadRobotSpec(sim::DefaultRobotPath()), with_table, options, correction);
+    std::vector<float> scene(3 * 3000), arm(3 * 16);
+    core::Rng rng(1);
+    cloud.Make(o, frame, rng, scene.data(), arm.data());
+    std::vector<double> z;
+    for (int i = 0; i < 3000; ++i)
+      if (std::abs(scene[3 * i + 2]) < 0.04) z.push_back(scene[3 * i + 2]);
+    const double mean = std::accumulate(z.begin(), z.end(), 0.0) / z.size();
+    double var = 0;
+    for (double v : z) var += (v - mean) * (v - mean);
+    return std::sqrt(var / z.size());
+  };
+  const double reported = table_spread(core::Pose::Identity());
+  const double corrected = table_spread(truth);
+  EXPECT_LT(corrected, 0.5 * reported) << reported << " m spread at the reported pose";
+  EXPECT_LT(corrected, 0.004);
 }
 
 }  // namespace

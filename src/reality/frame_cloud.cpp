@@ -11,8 +11,11 @@ std::vector<float> DepthMetres(const RgbdFrame& frame) {
 }
 
 FrameCloud::FrameCloud(const sim::RobotSpec& robot, const sim::WorkspaceSpec& workspace,
-                       const Options& options)
-    : options_(options), workspace_(sim::MakeWorkspace(workspace)), robot_(robot) {
+                       const Options& options, const core::Pose& camera_correction)
+    : options_(options),
+      camera_correction_(camera_correction),
+      workspace_(sim::MakeWorkspace(workspace)),
+      robot_(robot) {
   scratch_.resize(3 * std::size_t(robot_.surface_capacity()));
 }
 
@@ -26,7 +29,7 @@ int FrameCloud::RemoveArm(const Observation& observation, const sim::Camera& cam
 
 void FrameCloud::Make(const Observation& observation, const RgbdFrame& frame, core::Rng& rng,
                       float* scene, float* arm) {
-  const sim::Camera camera{frame.intrinsics, frame.extrinsics};
+  const sim::Camera camera{frame.intrinsics, frame.extrinsics * camera_correction_};
   depth_ = DepthMetres(frame);
   RemoveArm(observation, camera, depth_);
   scratch_.resize(std::max(scratch_.size(), 3 * depth_.size()));

@@ -22,8 +22,10 @@ class FrameCloud {
     int arm_points = 512;
     double arm_margin = 0.03;  // m: depth this close to (or behind) the arm's surface is the arm
   };
+  // `camera_correction`: the camera's calibration (sim::CameraSpec::correction as a pose): a
+  // frame's reported extrinsics are composed with it before back-projecting.
   FrameCloud(const sim::RobotSpec& robot, const sim::WorkspaceSpec& workspace,
-             const Options& options);
+             const Options& options, const core::Pose& camera_correction = core::Pose::Identity());
   ~FrameCloud();
 
   // Fills scene[scene_points*3] and arm[arm_points*3], robot base frame.
@@ -37,6 +39,7 @@ class FrameCloud {
 
  private:
   Options options_;
+  core::Pose camera_correction_;
   sim::Workspace workspace_;
   sim::RobotMask robot_;
   std::vector<float> depth_, scratch_;

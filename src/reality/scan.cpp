@@ -4,6 +4,7 @@
 
 #include "core/error.h"
 #include "core/log.h"
+#include "core/rng.h"
 #include "sim/camera.h"
 #include "sim/robot.h"
 
@@ -75,6 +76,48 @@ core::Scan CaptureScan(Robot& robot, const std::vector<core::Pose>& path,
     writer.Add(std::move(f), frame.rgb, frame.depth);
     if (progress) progress->Advance();
   }
+  return writer.scan();
+}
+
+core::Scan CaptureCameraFrames(Robot& robot, const sim::Kinematics& kinematics,
+                               const Eigen::Vector3d& centre, int count, double spread,
+                               uint64_t seed, const std::filesystem::path& out,
+                               core::Progress* progress) {
+  if (count < 1) throw core::ConfigError("camera frames", "count", "at least one frame");
+  const RobotInfo info = robot.Info();
+  if (info.cameras.empty()) throw core::Error(info.name + " reports no camera to calibrate");
+  core::ScanWriter writer(out, info.name, info.robot);
+  core::Rng rng(seed, 0xf4a3);
+  const int settle = std::max(1, static_cast<int>(std::ceil(1.5 / info.control_period)));
+  const double finger = 0.5 * robot.Observe(false).gripper_width;  // the fingers stay as they are
+  const sim::ArmVector home = kinematics.home();
+  const core::Quat orientation = kinematics.EePose(home).rotation;
+  for (int i = 0; i < count; ++i) {
+    sim::JointTargets targets;
+    targets.arm = home;
+    targets.finger = finger;
+    if (i > 0) {
+      const Eigen::Vector3d offset(rng.Uniform(-spread, spread), rng.Uniform(-spread, spread),
+                                   rng.Uniform(0, spread));
+      targets.arm = kinematics.SolveIk(home, {centre + offset, orientation});
+    }
+    for (int k = 0; k < settle; ++k) robot.SendTargets(targets);
+    const Observation o = robot.Observe(true);
+    if (o.frames.empty()) throw core::Error(info.name + " sent no camera frame");
+    const RgbdFrame& frame = o.frames.front();
+    core::ScanFrameInfo f;
+    f.stamp = frame.stamp;
+    f.intrinsics = frame.intrinsics;
+    f.camera_to_base = frame.extrinsics;
+    std::copy(o.q.data(), o.q.data() + sim::kArmDof, f.joint_positions.begin());
+    f.gripper_width = o.gripper_width;
+    writer.Add(std::move(f), frame.rgb, frame.depth);
+    if (progress) progress->Advance();
+  }
+  sim::JointTargets back;
+  back.arm = home;
+  back.finger = finger;
+  for (int k = 0; k < settle; ++k) robot.SendTargets(back);
   return writer.scan();
 }
 

@@ -47,6 +47,17 @@ core::Scan CaptureScan(Robot& robot, const std::vector<core::Pose>& path,
                        const sim::CameraIntrinsics& intrinsics, const std::filesystem::path& out,
                        core::Progress* progress = nullptr);
 
+// Frames of the robot's fixed camera for its calibration (`twinforge calibrate`): the first with
+// the arm at home, then with the tool held (in its home orientation) at `count - 1` points drawn
+// within `spread` m of `centre` (above it only), so that the camera sees the arm, whose shape is
+// known exactly, in different places. One frame is saved at each with its reported extrinsics and
+// the joints, in the layout of core/scan.h; the arm goes home at the end. The scene is not
+// touched.
+core::Scan CaptureCameraFrames(Robot& robot, const sim::Kinematics& kinematics,
+                               const Eigen::Vector3d& centre, int count, double spread,
+                               uint64_t seed, const std::filesystem::path& out,
+                               core::Progress* progress = nullptr);
+
 // The scene in a second state, for the articulation estimate (RialTo: scan, open the drawer,
 // scan again): the operator drives the robot from where it is, without a reset, until they say
 // done (or 3 x the task's horizon); then the arm goes back to its home pose with the gripper

@@ -87,7 +87,18 @@ Camera MakeCamera(const CameraSpec& spec) {
   r << right, down, forward;
   camera.pose.rotation = core::Quat(r).normalized();
   camera.pose.translation = position;
+  camera.pose = camera.pose * CorrectionPose(spec.correction);
   return camera;
+}
+
+core::Pose CorrectionPose(const std::array<double, 6>& c) {
+  return {Eigen::Vector3d(c[3], c[4], c[5]), core::ExpMap(Eigen::Vector3d(c[0], c[1], c[2]))};
+}
+
+std::array<double, 6> CorrectionArray(const core::Pose& correction) {
+  const Eigen::Vector3d r = core::LogMap(correction.rotation);
+  const Eigen::Vector3d& t = correction.translation;
+  return {r.x(), r.y(), r.z(), t.x(), t.y(), t.z()};
 }
 
 Workspace MakeWorkspace(const WorkspaceSpec& spec) {

@@ -29,8 +29,12 @@ struct Camera {
   core::Pose pose;
 };
 
-// The task's camera: intrinsics from its field of view, pose looking from `position` at `look_at`.
+// The task's camera: intrinsics from its field of view, pose looking from `position` at `look_at`,
+// then moved by its calibration's correction.
 Camera MakeCamera(const CameraSpec& spec);
+// A calibration correction ([rx, ry, rz, x, y, z], camera frame) as a pose, and back.
+core::Pose CorrectionPose(const std::array<double, 6>& correction);
+std::array<double, 6> CorrectionArray(const core::Pose& correction);
 
 struct Workspace {
   Eigen::Vector3f min, max;

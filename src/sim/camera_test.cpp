@@ -145,5 +145,20 @@ TEST(Camera, EmbreeDepthMatchesMjRay) {
   }
 }
 
+TEST(Camera, ACalibrationCorrectionMovesTheCameraInItsOwnFrame) {
+  CameraSpec spec;
+  const Camera nominal = MakeCamera(spec);
+  spec.correction = {0.01, -0.02, 0.03, 0.004, -0.005, 0.006};
+  const Camera corrected = MakeCamera(spec);
+  // Moved by (0.004, -0.005, 0.006) along the camera's own axes, turned by 0.037 rad.
+  EXPECT_LT(
+      (corrected.pose.translation - nominal.pose * Eigen::Vector3d(0.004, -0.005, 0.006)).norm(),
+      1e-12);
+  EXPECT_NEAR(core::AngleBetween(corrected.pose.rotation, nominal.pose.rotation),
+              std::sqrt(0.01 * 0.01 + 0.02 * 0.02 + 0.03 * 0.03), 1e-9);
+  const auto back = CorrectionArray(CorrectionPose(spec.correction));
+  for (int i = 0; i < 6; ++i) EXPECT_NEAR(back[i], spec.correction[i], 1e-12);
+}
+
 }  // namespace
 }  // namespace twinforge::sim

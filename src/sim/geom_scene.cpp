@@ -169,25 +169,8 @@ void GeomScene::Update(const mjModel* m, const mjData* d, unsigned hidden_groups
     }
     if (!enable) continue;
     // Column-major 3x4: rotation (times the unit shape's scale) and translation.
-    float scale[3] = {1, 1, 1};
-    if (unit_shape_[i]) {
-      const mjtNum* s = m->geom_size + 3 * g;
-      switch (m->geom_type[g]) {
-        case mjGEOM_PLANE:
-          scale[0] = s[0] > 0 ? s[0] : kPlaneHalf;
-          scale[1] = s[1] > 0 ? s[1] : kPlaneHalf;
-          break;
-        case mjGEOM_SPHERE:
-          scale[0] = scale[1] = scale[2] = s[0];
-          break;
-        case mjGEOM_CYLINDER:
-          scale[0] = scale[1] = s[0];
-          scale[2] = s[1];
-          break;
-        default:  // box, ellipsoid: half-sizes per axis
-          for (int c = 0; c < 3; ++c) scale[c] = s[c];
-      }
-    }
+    std::array<double, 3> scale{1, 1, 1};
+    if (unit_shape_[i]) scale = UnitShapeScale(m, g);
     const mjtNum* r = d->geom_xmat + 9 * g;  // row-major
     float xfm[12];
     for (int col = 0; col < 3; ++col)
@@ -220,6 +203,20 @@ GeomScene::Hit GeomScene::Cast(const float origin[3], const float direction[3]) 
   rtcIntersect1(embree_->top, &context, &rh);
   if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return {};
   return {rh.ray.tfar, geom_of_instance_[rh.hit.instID[0]]};
+}
+
+std::array<double, 3> UnitShapeScale(const mjModel* m, int g) {
+  const mjtNum* s = m->geom_size + 3 * g;
+  switch (m->geom_type[g]) {
+    case mjGEOM_PLANE:
+      return {s[0] > 0 ? s[0] : kPlaneHalf, s[1] > 0 ? s[1] : kPlaneHalf, 1};
+    case mjGEOM_SPHERE:
+      return {s[0], s[0], s[0]};
+    case mjGEOM_CYLINDER:
+      return {s[0], s[0], s[1]};
+    default:  // box, ellipsoid: half-sizes per axis
+      return {s[0], s[1], s[2]};
+  }
 }
 
 }  // namespace twinforge::sim

@@ -8,6 +8,7 @@
 // around: depth within 0.5% of the radius of the exact surface (0.2 mm on a 4 cm mug).
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <vector>
@@ -60,5 +61,7 @@ struct TriangleMesh {
 };
 // Tessellates geom `g` of `m` (empty for height fields).
 TriangleMesh TessellateGeom(const mjModel* m, int g);
+// The scale a unit shape of geom `g` is drawn at (per axis of the geom frame).
+std::array<double, 3> UnitShapeScale(const mjModel* m, int g);
 
 }  // namespace twinforge::sim

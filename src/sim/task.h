@@ -224,6 +224,10 @@ struct CameraSpec {
   std::array<double, 3> look_at{0.5, 0.0, 0.1};
   double fovy_deg = 58.0;
   int width = 80, height = 60;
+  // Where the camera really is against position/look_at, from `twinforge calibrate`: rotation
+  // vector then translation (rad, m) in the camera's own frame (OpenCV axes). A real frame's
+  // reported extrinsics are corrected by the same (reality::FrameCloud).
+  std::array<double, 6> correction{0, 0, 0, 0, 0, 0};
   template <class A>
   void Serialize(A& a) {
     a("name", name);
@@ -232,6 +236,7 @@ struct CameraSpec {
     a("fovy_deg", fovy_deg);
     a("width", width);
     a("height", height);
+    a("correction", correction);
     a.Require(width > 0 && height > 0, "width", "a positive image size");
     a.Require(fovy_deg > 1 && fovy_deg < 170, "fovy_deg", "a field of view in (1, 170) deg");
   }

@@ -13,9 +13,10 @@ namespace twinforge::real2sim {
 torch::Tensor RgbLoss(const torch::Tensor& rgb, const torch::Tensor& silhouette,
                       const torch::Tensor& target, const torch::Tensor& mask);
 
-// Mean Huber depth error (m, Huber width `delta`) over pixels where the target has a return, the
-// rendering covers the pixel (silhouette > 0.5) and the two are within `outlier` of each other
-// (farther apart is something the twin does not have: a person, a cable).
+// Mean Huber depth error (m, Huber width `delta`) over the pixels where the target has a return.
+// A pixel the rendering does not cover (silhouette <= 0.5) or misses by more than `outlier` (a
+// person, a cable: something the twin does not have) costs what `outlier` would, without a
+// gradient: a pose cannot lower the loss by pushing what disagrees out of view.
 torch::Tensor DepthLoss(const torch::Tensor& depth, const torch::Tensor& silhouette,
                         const torch::Tensor& target, double delta = 0.01, double outlier = 0.05);
 

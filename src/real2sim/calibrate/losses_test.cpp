@@ -62,8 +62,11 @@ TEST(ImageLosses, ZeroAtTheTargetAndPositiveAway) {
   EXPECT_GT(RgbLoss(rgb + 0.1, full, rgb, mask).item<double>(), 0.09);
   EXPECT_NEAR(DepthLoss(depth, full, depth).item<double>(), 0, 1e-12);
   EXPECT_GT(DepthLoss(depth + 0.02, full, depth).item<double>(), 0);
-  // Beyond the outlier distance a pixel is ignored, not punished.
-  EXPECT_NEAR(DepthLoss(depth + 0.3, full, depth).item<double>(), 0, 1e-12);
+  // Beyond the outlier distance a pixel costs a constant, the same as a pixel not covered.
+  const double cap = DepthLoss(depth + 0.3, full, depth, 0.01, 0.05).item<double>();
+  EXPECT_NEAR(cap, 0.01 * (0.05 - 0.005), 1e-12);
+  EXPECT_NEAR(DepthLoss(depth, 0 * full, depth, 0.01, 0.05).item<double>(), cap, 1e-12);
+  EXPECT_LT(DepthLoss(depth + 0.02, full, depth, 0.01, 0.05).item<double>(), cap);
   EXPECT_NEAR(SilhouetteLoss(mask, mask).item<double>(), 0, 1e-9);
   EXPECT_NEAR(SilhouetteLoss(1 - mask, mask).item<double>(), 1, 1e-12);
 }

@@ -1,0 +1,395 @@
+#include "real2sim/calibrate/calibrate.h"
+
+#include <open3d/Open3D.h>
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include "core/error.h"
+#include "core/fs.h"
+#include "core/image.h"
+#include "core/rng.h"
+#include "real2sim/calibrate/losses.h"
+#include "real2sim/calibrate/soft_render.h"
+#include "real2sim/recipe.h"
+#include "real2sim/segment.h"
+#include "sim/camera.h"
+#include "sim/env.h"
+#include "sim/geom_scene.h"
+
+namespace twinforge::real2sim {
+namespace {
+
+const auto kDouble = torch::TensorOptions().dtype(torch::kFloat64);
+
+// The twin's visible geoms (robot and scene), tessellated once in their own frames; scanned
+// meshes decimated so that a frame renders in milliseconds.
+class TwinGeometry {
+ public:
+  TwinGeometry(const sim::TaskSpec& spec, int mesh_triangles)
+      : task_(std::make_shared<const sim::Task>(spec)), env_(task_) {
+    const mjModel* m = env_.model();
+    for (int g = 0; g < m->ngeom; ++g) {
+      if (sim::GeomRgba(m, g)[3] <= 0 || m->geom_group[g] > 2) continue;
+      const sim::TriangleMesh t = sim::TessellateGeom(m, g);
+      if (t.triangles.empty()) continue;
+      Mesh mesh;
+      for (size_t i = 0; i + 2 < t.vertices.size(); i += 3)
+        mesh.vertices.emplace_back(t.vertices[i], t.vertices[i + 1], t.vertices[i + 2]);
+      for (size_t i = 0; i + 2 < t.triangles.size(); i += 3)
+        mesh.triangles.emplace_back(t.triangles[i], t.triangles[i + 1], t.triangles[i + 2]);
+      if (static_cast<int>(mesh.triangles.size()) > mesh_triangles)
+        mesh = Simplify(mesh, mesh_triangles);
+      Piece piece;
+      piece.geom = g;
+      piece.mesh = std::move(mesh);
+      if (t.unit) {
+        const auto s = sim::UnitShapeScale(m, g);
+        for (auto& v : piece.mesh.vertices) v = v.cwiseProduct(Eigen::Vector3d(s[0], s[1], s[2]));
+      }
+      const float* rgba = sim::GeomRgba(m, g);
+      piece.color = Eigen::Vector3d(rgba[0], rgba[1], rgba[2]);
+      spdlog::debug("calibrate: geom {} renders as {} triangles", g, piece.mesh.triangles.size());
+      pieces_.push_back(std::move(piece));
+    }
+    if (pieces_.empty())
+      throw core::ConfigError(spec.file.string(), "scene", "a twin scene with visible geoms");
+  }
+
+  // The twin with the arm at `q` and the fingers `gripper_width` apart, in the base frame.
+  RasterMesh Posed(const std::array<double, 7>& q, double gripper_width) {
+    const mjModel* m = env_.model();
+    mjData* d = env_.mutable_data();
+    const auto& robot = task_->index().robot;
+    for (int i = 0; i < sim::kArmDof; ++i) d->qpos[robot.arm_qpos[i]] = q[i];
+    for (int i = 0; i < 2; ++i) d->qpos[robot.finger_qpos[i]] = 0.5 * gripper_width;
+    mj_kinematics(m, d);
+    const core::Pose to_base = env_.base().Inverse();
+    std::vector<double> v, c;
+    std::vector<int64_t> f;
+    for (const Piece& piece : pieces_) {
+      const int g = piece.geom;
+      const Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> r(d->geom_xmat + 9 * g);
+      const Eigen::Map<const Eigen::Vector3d> p(d->geom_xpos + 3 * g);
+      const int64_t first = static_cast<int64_t>(v.size() / 3);
+      for (const auto& local : piece.mesh.vertices) {
+        const Eigen::Vector3d x = to_base * Eigen::Vector3d(r * local + p);
+        v.insert(v.end(), {x.x(), x.y(), x.z()});
+        c.insert(c.end(), {piece.color.x(), piece.color.y(), piece.color.z()});
+      }
+      for (const auto& t : piece.mesh.triangles)
+        f.insert(f.end(), {first + t[0], first + t[1], first + t[2]});
+    }
+    RasterMesh mesh;
+    const int64_t nv = static_cast<int64_t>(v.size() / 3), nf = static_cast<int64_t>(f.size() / 3);
+    mesh.vertices = torch::from_blob(v.data(), {nv, 3}, kDouble).clone();
+    mesh.colors = torch::from_blob(c.data(), {nv, 3}, kDouble).clone();
+    mesh.faces =
+        torch::from_blob(f.data(), {nf, 3}, torch::TensorOptions().dtype(torch::kInt64)).clone();
+    return mesh;
+  }
+
+ private:
+  struct Piece {
+    int geom = -1;
+    Mesh mesh;  // geom frame, scaled
+    Eigen::Vector3d color;
+  };
+  std::shared_ptr<const sim::Task> task_;
+  sim::Env env_;
+  std::vector<Piece> pieces_;
+};
+
+// One real frame, ready to compare with renders.
+struct RealFrame {
+  core::Pose reported;
+  core::PinholeIntrinsics intrinsics;
+  torch::Tensor depth;  // [H, W] m, 0 = no return
+  torch::Tensor rgb;    // [H, W, 3] in [0, 1]
+  RasterMesh twin;      // the twin posed as the robot was
+};
+
+RealFrame ReadFrame(const core::Scan& scan, size_t i, TwinGeometry& geometry) {
+  const core::ScanFrameInfo& info = scan.frames[i];
+  RealFrame frame;
+  frame.reported = info.camera_to_base;
+  frame.intrinsics = info.intrinsics;
+  const core::Image depth = core::ReadPng(scan.dir / info.depth);
+  const core::Image color = core::ReadPng(scan.dir / info.color);
+  const int w = info.intrinsics.width, h = info.intrinsics.height;
+  if (depth.width != w || depth.height != h || depth.bit_depth != 16 || depth.channels != 1)
+    throw core::ConfigError((scan.dir / info.depth).string(), "depth",
+                            "a 16-bit grey image of " + std::to_string(w) + "x" +
+                                std::to_string(h) + " (the frame's intrinsics)");
+  if (color.width != w || color.height != h || color.channels < 3)
+    throw core::ConfigError((scan.dir / info.color).string(), "color",
+                            "an RGB image of " + std::to_string(w) + "x" + std::to_string(h));
+  frame.depth = torch::empty({h, w}, kDouble);
+  frame.rgb = torch::empty({h, w, 3}, kDouble);
+  auto da = frame.depth.accessor<double, 2>();
+  auto ca = frame.rgb.accessor<double, 3>();
+  const auto* mm = reinterpret_cast<const uint16_t*>(depth.bytes.data());
+  for (int r = 0; r < h; ++r) {
+    for (int c = 0; c < w; ++c) {
+      da[r][c] = mm[r * w + c] / scan.depth_scale;
+      for (int k = 0; k < 3; ++k)
+        ca[r][c][k] = color.bytes[(r * w + c) * color.channels + k] / 255.0;
+    }
+  }
+  frame.twin = geometry.Posed(info.joint_positions, info.gripper_width);
+  return frame;
+}
+
+// Pixels' camera-frame rays (x/z, y/z, 1) for an image, [H, W, 3].
+torch::Tensor Rays(const core::PinholeIntrinsics& k) {
+  auto rays = torch::ones({k.height, k.width, 3}, kDouble);
+  auto a = rays.accessor<double, 3>();
+  for (int r = 0; r < k.height; ++r) {
+    for (int c = 0; c < k.width; ++c) {
+      a[r][c][0] = (c - k.cx) / k.fx;
+      a[r][c][1] = (r - k.cy) / k.fy;
+    }
+  }
+  return rays;
+}
+
+// Up to `count` of the flat indices where `mask` is set, drawn at random.
+torch::Tensor Draw(const torch::Tensor& mask, int count, core::Rng& rng) {
+  const auto where = torch::nonzero(mask.reshape(-1)).reshape(-1);
+  const int64_t n = where.size(0);
+  if (n <= count) return where;
+  std::vector<int64_t> pick(count);
+  for (int i = 0; i < count; ++i) pick[i] = static_cast<int64_t>(rng.Uniform(0, 1) * n) % n;
+  return where.index_select(
+      0,
+      torch::from_blob(pick.data(), {count}, torch::TensorOptions().dtype(torch::kInt64)).clone());
+}
+
+FrameFit Fit(const RealFrame& frame, const core::Pose& pose, double outlier) {
+  torch::NoGradGuard no_grad;
+  SoftRasterOptions sharp;
+  sharp.sigma = 0.3;
+  const SoftImage image = SoftRasterize(frame.twin, frame.intrinsics, ToTensor(pose), sharp);
+  const auto seen = (frame.depth > 0) & (image.silhouette > 0.5);
+  const auto error = (image.depth - frame.depth).abs().masked_select(seen);
+  FrameFit fit;
+  const int64_t returns = (frame.depth > 0).sum().item<int64_t>();
+  const auto close = error.masked_select(error < outlier);
+  fit.inliers = returns > 0 ? static_cast<double>(close.size(0)) / returns : 0;
+  fit.median_depth_error = close.size(0) > 0 ? close.median().item<double>() : outlier;
+  return fit;
+}
+
+// Open3D point-to-plane ICP of the real clouds (from the reported pose) onto the twin's surface:
+// the correction it implies for the camera (fixed mount: one for all frames).
+core::Pose IcpCorrection(const std::vector<RealFrame>& frames, double outlier) {
+  auto source = std::make_shared<open3d::geometry::PointCloud>();
+  auto target = std::make_shared<open3d::geometry::PointCloud>();
+  for (const RealFrame& f : frames) {
+    const auto& k = f.intrinsics;
+    const auto da = f.depth.accessor<double, 2>();
+    for (int r = 0; r < k.height; ++r) {
+      for (int c = 0; c < k.width; ++c) {
+        const double z = da[r][c];
+        if (z <= 0) continue;
+        source->points_.push_back(f.reported *
+                                  Eigen::Vector3d((c - k.cx) / k.fx * z, (r - k.cy) / k.fy * z, z));
+      }
+    }
+    Mesh twin;
+    const auto v = f.twin.vertices.contiguous();
+    const auto t = f.twin.faces.contiguous();
+    for (int64_t i = 0; i < v.size(0); ++i)
+      twin.vertices.emplace_back(v[i][0].item<double>(), v[i][1].item<double>(),
+                                 v[i][2].item<double>());
+    const auto ta = t.accessor<int64_t, 2>();
+    for (int64_t i = 0; i < t.size(0); ++i)
+      twin.triangles.emplace_back(static_cast<int>(ta[i][0]), static_cast<int>(ta[i][1]),
+                                  static_cast<int>(ta[i][2]));
+    std::vector<Eigen::Vector3d> normals;
+    const auto points = SampleSurface(twin, 20000, 7, &normals);
+    target->points_.insert(target->points_.end(), points.begin(), points.end());
+    target->normals_.insert(target->normals_.end(), normals.begin(), normals.end());
+  }
+  namespace reg = open3d::pipelines::registration;
+  const auto result = reg::RegistrationICP(*source, *target, outlier, Eigen::Matrix4d::Identity(),
+                                           reg::TransformationEstimationPointToPlane(),
+                                           reg::ICPConvergenceCriteria(1e-7, 1e-7, 60));
+  const core::Pose moved = core::Pose::FromMatrix(result.transformation_);
+  return frames.front().reported.Inverse() * moved * frames.front().reported;
+}
+
+nlohmann::json ToJson(const core::Pose& p) {
+  const Eigen::Vector3d r = core::LogMap(p.rotation);
+  return {{"translation_mm",
+           {p.translation.x() * 1e3, p.translation.y() * 1e3, p.translation.z() * 1e3}},
+          {"rotation_deg", {r.x() * 180 / M_PI, r.y() * 180 / M_PI, r.z() * 180 / M_PI}},
+          {"distance_mm", p.translation.norm() * 1e3},
+          {"angle_deg", r.norm() * 180 / M_PI}};
+}
+
+nlohmann::json ToJson(const std::vector<FrameFit>& fits) {
+  nlohmann::json out = nlohmann::json::array();
+  for (const FrameFit& f : fits)
+    out.push_back({{"median_depth_error_mm", f.median_depth_error * 1e3}, {"inliers", f.inliers}});
+  return out;
+}
+
+}  // namespace
+
+CameraCalibration CalibrateCamera(const sim::TaskSpec& twin_task, const core::Scan& scan,
+                                  const CalibrateOptions& options, core::Progress* progress) {
+  if (scan.frames.empty())
+    throw core::ConfigError((scan.dir / "frames.json").string(), "frames", "at least one frame");
+  const auto start = std::chrono::steady_clock::now();
+  TwinGeometry geometry(twin_task, options.mesh_triangles);
+  std::vector<RealFrame> frames;
+  for (size_t i = 0; i < scan.frames.size(); ++i) frames.push_back(ReadFrame(scan, i, geometry));
+
+  CameraCalibration out;
+  for (const RealFrame& f : frames) {
+    out.before.push_back(Fit(f, f.reported, options.outlier));
+    if (out.before.back().inliers < 0.05)
+      throw core::ConfigError(
+          (scan.dir / scan.frames[out.before.size() - 1].depth).string(), "depth",
+          "a frame that shows the twin's scene (under 5% of its returns are "
+          "within " +
+              std::to_string(options.outlier) + " m of the twin seen from the reported pose)");
+  }
+
+  // Adam on the correction, coarse to fine.
+  core::Rng rng(options.seed, 0xca1b);
+  auto delta = torch::zeros({6}, kDouble).requires_grad_(true);
+  torch::optim::Adam adam({delta}, torch::optim::AdamOptions(options.learning_rate));
+  const int stages = static_cast<int>(options.sigmas.size());
+  // What 1 mm of mean depth error costs in the depth term (Huber, quadratic below 1 cm).
+  const double millimetre = options.depth_weight * 0.5 * 1e-6;
+  for (int step = 0; step < options.iterations; ++step) {
+    // Cosine decay of the step: the last steps settle instead of wandering.
+    static_cast<torch::optim::AdamOptions&>(adam.param_groups()[0].options())
+        .lr(options.learning_rate * 0.5 * (1 + std::cos(M_PI * step / options.iterations)));
+    SoftRasterOptions raster;
+    raster.sigma = options.sigmas[std::min(stages - 1, step * stages / options.iterations)];
+    raster.cutoff = 3;
+    torch::Tensor loss = torch::zeros({}, kDouble);
+    for (const RealFrame& f : frames) {
+      const CameraTensor pose = PerturbPose(f.reported, delta);
+      const SoftImage image = SoftRasterize(f.twin, f.intrinsics, pose, raster);
+      loss = loss + options.depth_weight *
+                        DepthLoss(image.depth, image.silhouette, f.depth, 0.01, options.outlier);
+      // EMD between the real returns and the twin's visible surface, both in the base frame
+      // (the real ones moved by the pose; the twin's where the render puts them).
+      const auto rays = Rays(f.intrinsics).reshape({-1, 3});
+      const auto covered = image.silhouette.detach() > 0.5;
+      const auto real_index = Draw((f.depth > 0) & covered, options.emd_points, rng);
+      const auto twin_index = Draw(covered, options.emd_points, rng);
+      if (real_index.size(0) < 16 || twin_index.size(0) < 16) continue;
+      const auto real_cam = rays.index_select(0, real_index) *
+                            f.depth.reshape(-1).index_select(0, real_index).unsqueeze(1);
+      const auto twin_cam =
+          rays.index_select(0, twin_index) *
+          image.depth.detach().reshape(-1).index_select(0, twin_index).unsqueeze(1);
+      const CameraTensor fixed = ToTensor(ApplyDelta(f.reported, delta));
+      const auto real_base = torch::matmul(real_cam, pose.rotation.t()) + pose.translation;
+      const auto twin_base = torch::matmul(twin_cam, fixed.rotation.t()) + fixed.translation;
+      loss = loss + options.emd_weight * SinkhornEmd(real_base, twin_base, 0.003, 60);
+    }
+    loss = loss / static_cast<double>(frames.size()) +
+           millimetre * ((delta.slice(0, 0, 3) / options.prior_rotation).square().sum() +
+                         (delta.slice(0, 3, 6) / options.prior_translation).square().sum());
+    adam.zero_grad();
+    loss.backward();
+    adam.step();
+    out.loss.push_back(loss.item<double>());
+    if (progress) progress->Advance(1, "loss " + std::to_string(out.loss.back()));
+  }
+  out.correction = ApplyDelta(core::Pose::Identity(), delta);
+  out.icp_correction = IcpCorrection(frames, options.outlier);
+  for (const RealFrame& f : frames) {
+    out.after.push_back(Fit(f, f.reported * out.correction, options.outlier));
+    out.icp.push_back(Fit(f, f.reported * out.icp_correction, options.outlier));
+  }
+  out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return out;
+}
+
+std::vector<FrameFit> FitFrames(const sim::TaskSpec& twin_task, const core::Scan& scan,
+                                const core::Pose& correction, const CalibrateOptions& options) {
+  TwinGeometry geometry(twin_task, options.mesh_triangles);
+  std::vector<FrameFit> fits;
+  for (size_t i = 0; i < scan.frames.size(); ++i) {
+    const RealFrame f = ReadFrame(scan, i, geometry);
+    fits.push_back(Fit(f, f.reported * correction, options.outlier));
+  }
+  return fits;
+}
+
+nlohmann::json ToJson(const CameraCalibration& c) {
+  return {{"correction", ToJson(c.correction)},
+          {"correction_array", sim::CorrectionArray(c.correction)},
+          {"icp_correction", ToJson(c.icp_correction)},
+          {"frames_before", ToJson(c.before)},
+          {"frames_after", ToJson(c.after)},
+          {"frames_icp", ToJson(c.icp)},
+          {"loss_first", c.loss.empty() ? 0.0 : c.loss.front()},
+          {"loss_last", c.loss.empty() ? 0.0 : c.loss.back()},
+          {"seconds", c.seconds}};
+}
+
+void WriteCalibratedTwin(const std::filesystem::path& twin_dir, const core::Scan& scan,
+                         const CameraCalibration& calibration, const CalibrateOptions& options,
+                         const std::filesystem::path& out) {
+  namespace fs = std::filesystem;
+  if (fs::exists(out) && fs::equivalent(out, twin_dir))
+    throw core::ConfigError(out.string(), "out", "a directory other than the twin's own");
+  core::EnsureDirectory(out);
+  fs::copy(twin_dir, out, fs::copy_options::recursive | fs::copy_options::overwrite_existing);
+  sim::TaskSpec task = sim::LoadTaskSpec((out / "task.yaml").string());
+  task.camera.correction = sim::CorrectionArray(calibration.correction);
+  WriteTwinTask(task, out);
+
+  // Before/after images: real colour | twin before | twin after | depth error before | after
+  // (black: agree; white: off by `outlier` or more), one row per frame.
+  const fs::path report = out / "calibration";
+  core::EnsureDirectory(report);
+  TwinGeometry geometry(sim::LoadTaskSpec((twin_dir / "task.yaml").string()),
+                        options.mesh_triangles);
+  for (size_t i = 0; i < scan.frames.size(); ++i) {
+    const RealFrame f = ReadFrame(scan, i, geometry);
+    torch::NoGradGuard no_grad;
+    SoftRasterOptions sharp;
+    sharp.sigma = 0.3;
+    const int w = f.intrinsics.width, h = f.intrinsics.height;
+    core::Image image{5 * w, h, 3, 8, std::vector<uint8_t>(5 * w * h * 3)};
+    auto put = [&](int panel, const torch::Tensor& rgb) {
+      const auto a = rgb.contiguous().clamp(0, 1);
+      const auto acc = a.accessor<double, 3>();
+      for (int r = 0; r < h; ++r)
+        for (int c = 0; c < w; ++c)
+          for (int k = 0; k < 3; ++k)
+            image.bytes[(r * 5 * w + panel * w + c) * 3 + k] =
+                static_cast<uint8_t>(acc[r][c][k] * 255 + 0.5);
+    };
+    put(0, f.rgb);
+    int panel = 1;
+    std::vector<torch::Tensor> errors;
+    for (const core::Pose& pose : {f.reported, f.reported * calibration.correction}) {
+      const SoftImage s = SoftRasterize(f.twin, f.intrinsics, ToTensor(pose), sharp);
+      put(panel++, s.rgb * s.silhouette.unsqueeze(2));
+      const auto both = ((f.depth > 0) & (s.silhouette > 0.5)).to(torch::kFloat64);
+      errors.push_back(((s.depth - f.depth).abs() / options.outlier).clamp(0, 1) * both);
+    }
+    for (const auto& e : errors) put(panel++, e.unsqueeze(2).expand({h, w, 3}));
+    char name[48];
+    std::snprintf(name, sizeof(name), "frame_%02zu.png", i);
+    core::WritePng(report / name, image);
+  }
+  nlohmann::json json = ToJson(calibration);
+  json["frames"] = scan.dir.string();
+  json["twin"] = twin_dir.string();
+  core::WriteFileAtomic(report / "calibration.json", json.dump(2));
+}
+
+}  // namespace twinforge::real2sim
