@@ -119,7 +119,6 @@ SoftImage SoftRasterize(const RasterMesh& mesh, const core::PinholeIntrinsics& k
               mesh.faces.contiguous(), k, options, pixels, triangles);
   }
   SoftImage image;
-  std::fprintf(stderr, "pairs %zu faces %ld\n", pixels.size(), (long)mesh.faces.size(0));
   if (pixels.empty()) {
     image.silhouette = torch::zeros({k.height, k.width}, kDouble) + 0 * u.sum();
     image.depth = torch::zeros({k.height, k.width}, kDouble) + 0 * u.sum();
