@@ -12,6 +12,17 @@ namespace twinforge::reality {
 
 namespace {
 
+// A frame's index entry: where the camera was said to be, and the arm's joints.
+core::ScanFrameInfo FrameInfo(const Observation& o, const RgbdFrame& frame) {
+  core::ScanFrameInfo f;
+  f.stamp = frame.stamp;
+  f.intrinsics = frame.intrinsics;
+  f.camera_to_base = frame.extrinsics;
+  std::copy(o.q.data(), o.q.data() + sim::kArmDof, f.joint_positions.begin());
+  f.gripper_width = o.gripper_width;
+  return f;
+}
+
 sim::CameraSpec ScanCameraSpec(const ScanOptions& o) {
   sim::CameraSpec spec;
   spec.name = "scan";
@@ -67,13 +78,7 @@ core::Scan CaptureScan(Robot& robot, const std::vector<core::Pose>& path,
   for (const core::Pose& pose : path) {
     const Observation o = robot.Observe(false);
     const RgbdFrame frame = robot.Capture({pose, intrinsics});
-    core::ScanFrameInfo f;
-    f.stamp = frame.stamp;
-    f.intrinsics = frame.intrinsics;
-    f.camera_to_base = frame.extrinsics;
-    std::copy(o.q.data(), o.q.data() + sim::kArmDof, f.joint_positions.begin());
-    f.gripper_width = o.gripper_width;
-    writer.Add(std::move(f), frame.rgb, frame.depth);
+    writer.Add(FrameInfo(o, frame), frame.rgb, frame.depth);
     if (progress) progress->Advance();
   }
   return writer.scan();
@@ -105,13 +110,7 @@ core::Scan CaptureCameraFrames(Robot& robot, const sim::Kinematics& kinematics,
     const Observation o = robot.Observe(true);
     if (o.frames.empty()) throw core::Error(info.name + " sent no camera frame");
     const RgbdFrame& frame = o.frames.front();
-    core::ScanFrameInfo f;
-    f.stamp = frame.stamp;
-    f.intrinsics = frame.intrinsics;
-    f.camera_to_base = frame.extrinsics;
-    std::copy(o.q.data(), o.q.data() + sim::kArmDof, f.joint_positions.begin());
-    f.gripper_width = o.gripper_width;
-    writer.Add(std::move(f), frame.rgb, frame.depth);
+    writer.Add(FrameInfo(o, frame), frame.rgb, frame.depth);
     if (progress) progress->Advance();
   }
   sim::JointTargets back;
