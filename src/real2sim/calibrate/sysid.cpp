@@ -1,0 +1,220 @@
+#include "real2sim/calibrate/sysid.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <random>
+
+#include "core/error.h"
+
+namespace twinforge::real2sim {
+namespace {
+
+int Find(const mjModel* m, mjtObj type, const PhysicalParameter& p) {
+  const int id = mj_name2id(m, type, p.name.c_str());
+  if (id < 0)
+    throw core::ConfigError("sysid", p.name,
+                            std::string("a ") + ToString(p.kind) + " named in the model");
+  return id;
+}
+
+}  // namespace
+
+const char* ToString(PhysicalParameter::Kind kind) {
+  switch (kind) {
+    case PhysicalParameter::Kind::kBodyMass:
+      return "body_mass";
+    case PhysicalParameter::Kind::kGeomFriction:
+      return "geom_friction";
+    case PhysicalParameter::Kind::kJointDamping:
+      return "joint_damping";
+    case PhysicalParameter::Kind::kJointFriction:
+      return "joint_friction";
+    case PhysicalParameter::Kind::kActuatorGain:
+      return "actuator_gain";
+  }
+  return "?";
+}
+
+double GetParameter(const mjModel* m, const PhysicalParameter& p) {
+  using K = PhysicalParameter::Kind;
+  switch (p.kind) {
+    case K::kBodyMass:
+      return m->body_mass[Find(m, mjOBJ_BODY, p)];
+    case K::kGeomFriction:
+      return m->geom_friction[3 * Find(m, mjOBJ_GEOM, p)];
+    case K::kJointDamping:
+      return m->dof_damping[m->jnt_dofadr[Find(m, mjOBJ_JOINT, p)]];
+    case K::kJointFriction:
+      return m->dof_frictionloss[m->jnt_dofadr[Find(m, mjOBJ_JOINT, p)]];
+    case K::kActuatorGain:
+      return m->actuator_gainprm[mjNGAIN * Find(m, mjOBJ_ACTUATOR, p)];
+  }
+  return 0;
+}
+
+void SetParameter(mjModel* m, const PhysicalParameter& p, double value) {
+  using K = PhysicalParameter::Kind;
+  switch (p.kind) {
+    case K::kBodyMass: {
+      const int b = Find(m, mjOBJ_BODY, p);
+      const double scale = value / m->body_mass[b];
+      m->body_mass[b] = value;
+      for (int i = 0; i < 3; ++i) m->body_inertia[3 * b + i] *= scale;
+      break;
+    }
+    case K::kGeomFriction:
+      m->geom_friction[3 * Find(m, mjOBJ_GEOM, p)] = value;
+      break;
+    case K::kJointDamping:
+      m->dof_damping[m->jnt_dofadr[Find(m, mjOBJ_JOINT, p)]] = value;
+      break;
+    case K::kJointFriction:
+      m->dof_frictionloss[m->jnt_dofadr[Find(m, mjOBJ_JOINT, p)]] = value;
+      break;
+    case K::kActuatorGain: {
+      // A position actuator: force = kp * ctrl - kp * q - kv * qdot.
+      const int a = Find(m, mjOBJ_ACTUATOR, p);
+      m->actuator_gainprm[mjNGAIN * a] = value;
+      m->actuator_biasprm[mjNBIAS * a + 1] = -value;
+      break;
+    }
+  }
+}
+
+std::vector<std::vector<double>> Replay(const mjModel* m, const Trajectory& t) {
+  if (static_cast<int>(t.qpos0.size()) != m->nq || static_cast<int>(t.qvel0.size()) != m->nv)
+    throw core::ConfigError("sysid", "qpos0", "a start state of the model's size");
+  sim::DataPtr d = sim::MakeData(m);
+  std::copy(t.qpos0.begin(), t.qpos0.end(), d->qpos);
+  std::copy(t.qvel0.begin(), t.qvel0.end(), d->qvel);
+  mj_forward(m, d.get());
+  std::vector<std::vector<double>> out;
+  for (const auto& ctrl : t.ctrl) {
+    std::copy(ctrl.begin(), ctrl.begin() + std::min<size_t>(ctrl.size(), m->nu), d->ctrl);
+    for (int s = 0; s < t.substeps; ++s) mj_step(m, d.get());
+    std::vector<double> seen;
+    for (int i : t.measured) seen.push_back(d->qpos[i]);
+    out.push_back(std::move(seen));
+  }
+  return out;
+}
+
+double TrajectoryError(const mjModel* m, const std::vector<Trajectory>& trajectories) {
+  double sum = 0;
+  int n = 0;
+  for (const Trajectory& t : trajectories) {
+    const auto replay = Replay(m, t);
+    for (size_t k = 0; k < replay.size() && k < t.positions.size(); ++k) {
+      for (size_t i = 0; i < replay[k].size(); ++i) {
+        const double e = replay[k][i] - t.positions[k][i];
+        sum += e * e;
+        ++n;
+      }
+    }
+  }
+  return n > 0 ? sum / n : 0;
+}
+
+SysidResult IdentifyParameters(mjModel* m, const std::vector<PhysicalParameter>& parameters,
+                               const std::vector<Trajectory>& trajectories,
+                               const SysidOptions& options) {
+  const size_t n = parameters.size();
+  SysidResult result;
+  // Log-parameters, clamped to the bounds.
+  std::vector<double> x(n), lo(n), hi(n);
+  for (size_t i = 0; i < n; ++i) {
+    lo[i] = std::log(parameters[i].lower);
+    hi[i] = std::log(parameters[i].upper);
+    x[i] = std::clamp(std::log(std::max(GetParameter(m, parameters[i]), 1e-12)), lo[i], hi[i]);
+  }
+  auto error = [&](const std::vector<double>& at) {
+    for (size_t i = 0; i < n; ++i) SetParameter(m, parameters[i], std::exp(at[i]));
+    ++result.replays;
+    return TrajectoryError(m, trajectories);
+  };
+  auto clamp = [&](std::vector<double>& at) {
+    for (size_t i = 0; i < n; ++i) at[i] = std::clamp(at[i], lo[i], hi[i]);
+  };
+  std::vector<double> best = x;
+  double best_error = error(x);
+
+  if (options.method == SysidOptions::Method::kGradient) {
+    // Normalized gradient steps with backtracking: a step that does not lower the error is halved.
+    double step = options.step;
+    for (int it = 0; it < options.iterations && step > 1e-6; ++it) {
+      std::vector<double> g(n);
+      for (size_t i = 0; i < n; ++i) {
+        std::vector<double> up = best, down = best;
+        up[i] += options.difference;
+        down[i] -= options.difference;
+        g[i] = (error(up) - error(down)) / (2 * options.difference);
+      }
+      const double norm = std::sqrt(std::inner_product(g.begin(), g.end(), g.begin(), 0.0));
+      if (norm <= 0) break;
+      std::vector<double> next = best;
+      for (size_t i = 0; i < n; ++i) next[i] -= step * g[i] / norm;
+      clamp(next);
+      const double e = error(next);
+      if (e < best_error) {
+        best = next;
+        best_error = e;
+        step *= 1.2;
+      } else {
+        step *= 0.5;
+      }
+      result.error.push_back(best_error);
+    }
+  } else {
+    // Separable CMA-ES: a Gaussian with a diagonal covariance, moved to the best half.
+    std::mt19937_64 rng(options.seed);
+    std::normal_distribution<double> normal;
+    const int lambda = std::max(4, options.population), mu = lambda / 2;
+    std::vector<double> weights(mu);
+    for (int i = 0; i < mu; ++i) weights[i] = std::log(mu + 0.5) - std::log(i + 1.0);
+    const double wsum = std::accumulate(weights.begin(), weights.end(), 0.0);
+    for (double& w : weights) w /= wsum;
+    std::vector<double> mean = best, scale(n, 1.0);
+    double sigma = options.sigma;
+    for (int it = 0; it < options.iterations; ++it) {
+      std::vector<std::pair<double, std::vector<double>>> samples;
+      for (int k = 0; k < lambda; ++k) {
+        std::vector<double> z(n), s(n);
+        for (size_t i = 0; i < n; ++i) {
+          z[i] = normal(rng);
+          s[i] = mean[i] + sigma * scale[i] * z[i];
+        }
+        clamp(s);
+        samples.push_back({error(s), s});
+      }
+      std::sort(samples.begin(), samples.end(),
+                [](const auto& a, const auto& b) { return a.first < b.first; });
+      if (samples.front().first < best_error) {
+        best_error = samples.front().first;
+        best = samples.front().second;
+      }
+      std::vector<double> next(n, 0.0), spread(n, 0.0);
+      for (int k = 0; k < mu; ++k)
+        for (size_t i = 0; i < n; ++i) next[i] += weights[k] * samples[k].second[i];
+      for (int k = 0; k < mu; ++k)
+        for (size_t i = 0; i < n; ++i)
+          spread[i] += weights[k] * std::pow((samples[k].second[i] - mean[i]) / sigma, 2);
+      for (size_t i = 0; i < n; ++i)
+        scale[i] = std::sqrt(0.7 * scale[i] * scale[i] + 0.3 * spread[i]);
+      // The step shrinks as the best half gathers: the mean moved less than sigma would.
+      double moved = 0;
+      for (size_t i = 0; i < n; ++i)
+        moved += std::pow((next[i] - mean[i]) / (sigma * scale[i] + 1e-12), 2);
+      sigma *= std::exp(0.2 * (std::sqrt(moved / n) * std::sqrt(static_cast<double>(mu)) - 1));
+      sigma = std::clamp(sigma, 1e-6, 2.0);
+      mean = next;
+      result.error.push_back(best_error);
+    }
+  }
+  for (size_t i = 0; i < n; ++i) SetParameter(m, parameters[i], std::exp(best[i]));
+  result.values.resize(n);
+  for (size_t i = 0; i < n; ++i) result.values[i] = std::exp(best[i]);
+  return result;
+}
+
+}  // namespace twinforge::real2sim

@@ -1,0 +1,73 @@
+// System identification: the physical parameters of a twin (masses, frictions, joint damping,
+// actuator gains) that make its motion match recorded real trajectories.
+//
+// A trajectory is a start state, the controls applied at each control step and what was measured
+// after it (some of the model's positions). The twin replays the controls from the same start and
+// the error is the mean squared difference of the measured positions. Parameters are searched in
+// log space (they are positive and their scales differ): by gradient descent with gradients from
+// central finite differences through MuJoCo (one replay per perturbed parameter), or by CMA-ES
+// (diagonal covariance) when the error is too rough for gradients.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "sim/model.h"
+
+namespace twinforge::real2sim {
+
+// One physical parameter of a model, named as in the MJCF.
+struct PhysicalParameter {
+  enum class Kind {
+    kBodyMass,       // body `name`'s mass (its inertia scaled along)
+    kGeomFriction,   // geom `name`'s sliding friction
+    kJointDamping,   // joint `name`'s damping
+    kJointFriction,  // joint `name`'s dry friction (frictionloss)
+    kActuatorGain,   // position actuator `name`'s stiffness kp (gain and bias together)
+  } kind = Kind::kGeomFriction;
+  std::string name;
+  double lower = 1e-4, upper = 1e4;  // the search stays within
+};
+const char* ToString(PhysicalParameter::Kind kind);
+
+// Reads / writes a parameter in `m`. Throws ConfigError if `name` is not in the model.
+double GetParameter(const mjModel* m, const PhysicalParameter& p);
+void SetParameter(mjModel* m, const PhysicalParameter& p, double value);
+
+struct Trajectory {
+  std::vector<double> qpos0, qvel0;            // start state (nq, nv)
+  int substeps = 1;                            // physics steps per control step
+  std::vector<std::vector<double>> ctrl;       // per control step (nu)
+  std::vector<int> measured;                   // qpos indices measured
+  std::vector<std::vector<double>> positions;  // per control step, after it (measured.size())
+};
+
+// Replays `t` in `m` (from its start state) and returns the measured positions per step.
+std::vector<std::vector<double>> Replay(const mjModel* m, const Trajectory& t);
+// Mean squared difference between the replay and the measured positions, over all trajectories.
+double TrajectoryError(const mjModel* m, const std::vector<Trajectory>& trajectories);
+
+struct SysidOptions {
+  enum class Method { kGradient, kCmaEs } method = Method::kGradient;
+  int iterations = 60;
+  double step = 0.2;         // gradient: largest change of a log-parameter per iteration
+  double difference = 0.03;  // gradient: central-difference step in log space (contacts make
+                             // the error rough at finer scales)
+  int population = 10;       // CMA-ES: samples per generation
+  double sigma = 0.5;        // CMA-ES: initial spread in log space
+  unsigned seed = 1;
+};
+
+struct SysidResult {
+  std::vector<double> values;  // identified, in the order of the parameters
+  std::vector<double> error;   // trajectory error per iteration (the best so far)
+  int replays = 0;             // trajectory replays spent
+};
+
+// Identifies `parameters` of `m` (their current values are the start) from `trajectories`.
+// `m` is left with the identified values.
+SysidResult IdentifyParameters(mjModel* m, const std::vector<PhysicalParameter>& parameters,
+                               const std::vector<Trajectory>& trajectories,
+                               const SysidOptions& options = {});
+
+}  // namespace twinforge::real2sim
