@@ -279,6 +279,9 @@ CameraCalibration CalibrateCamera(const sim::TaskSpec& twin_task, const core::Sc
       const SoftImage image = SoftRasterize(f.twin, f.intrinsics, pose, raster);
       loss = loss + options.depth_weight *
                         DepthLoss(image.depth, image.silhouette, f.depth, 0.01, options.outlier);
+      if (options.rgb_weight > 0)
+        loss = loss + options.rgb_weight * RgbLoss(image.rgb, image.silhouette, f.rgb,
+                                                   (f.depth > 0).to(torch::kFloat64));
       // EMD between the real returns and the twin's visible surface, both in the base frame
       // (the real ones moved by the pose; the twin's where the render puts them).
       const auto rays = Rays(f.intrinsics).reshape({-1, 3});

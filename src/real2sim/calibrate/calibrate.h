@@ -32,7 +32,8 @@ struct CalibrateOptions {
   double learning_rate = 0.003;             // rad and m per step (Adam)
   double depth_weight = 100;                // x mean Huber depth error (m)
   double emd_weight = 10;                   // x Sinkhorn EMD between the clouds (m)
-  int emd_points = 400;                     // points per cloud and frame for the EMD
+  double rgb_weight = 0;  // x mean colour difference where the real camera has returns
+  int emd_points = 400;   // points per cloud and frame for the EMD
   // A weak prior that the camera is near its reported pose (rad and m at which it costs as much as
   // a 1 mm mean depth error): directions the frames cannot tell apart stay where they were.
   double prior_rotation = 0.05;
@@ -47,6 +48,7 @@ struct CalibrateOptions {
     a("learning_rate", learning_rate);
     a("depth_weight", depth_weight);
     a("emd_weight", emd_weight);
+    a("rgb_weight", rgb_weight);
     a("emd_points", emd_points);
     a("prior_rotation", prior_rotation);
     a("prior_translation", prior_translation);
