@@ -97,26 +97,33 @@ core::Scan CaptureCameraFrames(Robot& robot, const sim::Kinematics& kinematics,
   const double finger = 0.5 * robot.Observe(false).gripper_width;  // the fingers stay as they are
   const sim::ArmVector home = kinematics.home();
   const core::Quat orientation = kinematics.EePose(home).rotation;
-  for (int i = 0; i < count; ++i) {
+  // Targets move from where the arm is to the goal over the first two thirds of the settling
+  // time, then hold: no jump for the arm's controller to chase.
+  auto move_to = [&](const sim::ArmVector& goal) {
+    const sim::ArmVector from = robot.Observe(false).q;
     sim::JointTargets targets;
-    targets.arm = home;
     targets.finger = finger;
+    const double ramp = std::max(1.0, 2.0 * settle / 3.0);
+    for (int k = 0; k < settle; ++k) {
+      targets.arm = from + std::min(1.0, (k + 1) / ramp) * (goal - from);
+      robot.SendTargets(targets);
+    }
+  };
+  for (int i = 0; i < count; ++i) {
+    sim::ArmVector goal = home;
     if (i > 0) {
       const Eigen::Vector3d offset(rng.Uniform(-spread, spread), rng.Uniform(-spread, spread),
                                    rng.Uniform(0, spread));
-      targets.arm = kinematics.SolveIk(home, {centre + offset, orientation});
+      goal = kinematics.SolveIk(home, {centre + offset, orientation});
     }
-    for (int k = 0; k < settle; ++k) robot.SendTargets(targets);
+    move_to(goal);
     const Observation o = robot.Observe(true);
     if (o.frames.empty()) throw core::Error(info.name + " sent no camera frame");
     const RgbdFrame& frame = o.frames.front();
     writer.Add(FrameInfo(o, frame), frame.rgb, frame.depth);
     if (progress) progress->Advance();
   }
-  sim::JointTargets back;
-  back.arm = home;
-  back.finger = finger;
-  for (int k = 0; k < settle; ++k) robot.SendTargets(back);
+  move_to(home);
   return writer.scan();
 }
 

@@ -51,8 +51,9 @@ core::Scan CaptureScan(Robot& robot, const std::vector<core::Pose>& path,
 // the arm at home, then with the tool held (in its home orientation) at `count - 1` points drawn
 // within `spread` m of `centre` (above it only), so that the camera sees the arm, whose shape is
 // known exactly, in different places. One frame is saved at each with its reported extrinsics and
-// the joints, in the layout of core/scan.h; the arm goes home at the end. The scene is not
-// touched.
+// the joints, in the layout of core/scan.h; the arm goes home at the end. Joint targets ramp to
+// each pose over a second rather than jump (there is no safety filter for joint targets). The
+// scene is not touched.
 core::Scan CaptureCameraFrames(Robot& robot, const sim::Kinematics& kinematics,
                                const Eigen::Vector3d& centre, int count, double spread,
                                uint64_t seed, const std::filesystem::path& out,
