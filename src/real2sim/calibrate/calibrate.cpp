@@ -102,6 +102,19 @@ class TwinGeometry {
   std::vector<Piece> pieces_;
 };
 
+// Pixels' camera-frame rays (x/z, y/z, 1) for an image, [H, W, 3].
+torch::Tensor Rays(const core::PinholeIntrinsics& k) {
+  auto rays = torch::ones({k.height, k.width, 3}, kDouble);
+  auto a = rays.accessor<double, 3>();
+  for (int r = 0; r < k.height; ++r) {
+    for (int c = 0; c < k.width; ++c) {
+      a[r][c][0] = (c - k.cx) / k.fx;
+      a[r][c][1] = (r - k.cy) / k.fy;
+    }
+  }
+  return rays;
+}
+
 // One real frame, ready to compare with renders.
 struct RealFrame {
   core::Pose reported;
@@ -109,6 +122,7 @@ struct RealFrame {
   torch::Tensor depth;  // [H, W] m, 0 = no return
   torch::Tensor rgb;    // [H, W, 3] in [0, 1]
   RasterMesh twin;      // the twin posed as the robot was
+  torch::Tensor rays;   // [H * W, 3] each pixel's (x/z, y/z, 1), for back-projecting depth
 };
 
 RealFrame ReadFrame(const core::Scan& scan, size_t i, TwinGeometry& geometry) {
@@ -139,20 +153,8 @@ RealFrame ReadFrame(const core::Scan& scan, size_t i, TwinGeometry& geometry) {
     }
   }
   frame.twin = geometry.Posed(info.joint_positions, info.gripper_width);
+  frame.rays = Rays(info.intrinsics).reshape({-1, 3});
   return frame;
-}
-
-// Pixels' camera-frame rays (x/z, y/z, 1) for an image, [H, W, 3].
-torch::Tensor Rays(const core::PinholeIntrinsics& k) {
-  auto rays = torch::ones({k.height, k.width, 3}, kDouble);
-  auto a = rays.accessor<double, 3>();
-  for (int r = 0; r < k.height; ++r) {
-    for (int c = 0; c < k.width; ++c) {
-      a[r][c][0] = (c - k.cx) / k.fx;
-      a[r][c][1] = (r - k.cy) / k.fy;
-    }
-  }
-  return rays;
 }
 
 // Up to `count` of the flat indices where `mask` is set, drawn at random.
@@ -284,15 +286,14 @@ CameraCalibration CalibrateCamera(const sim::TaskSpec& twin_task, const core::Sc
                                                    (f.depth > 0).to(torch::kFloat64));
       // EMD between the real returns and the twin's visible surface, both in the base frame
       // (the real ones moved by the pose; the twin's where the render puts them).
-      const auto rays = Rays(f.intrinsics).reshape({-1, 3});
       const auto covered = image.silhouette.detach() > 0.5;
       const auto real_index = Draw((f.depth > 0) & covered, options.emd_points, rng);
       const auto twin_index = Draw(covered, options.emd_points, rng);
       if (real_index.size(0) < 16 || twin_index.size(0) < 16) continue;
-      const auto real_cam = rays.index_select(0, real_index) *
+      const auto real_cam = f.rays.index_select(0, real_index) *
                             f.depth.reshape(-1).index_select(0, real_index).unsqueeze(1);
       const auto twin_cam =
-          rays.index_select(0, twin_index) *
+          f.rays.index_select(0, twin_index) *
           image.depth.detach().reshape(-1).index_select(0, twin_index).unsqueeze(1);
       const CameraTensor fixed = ToTensor(ApplyDelta(f.reported, delta));
       const auto real_base = torch::matmul(real_cam, pose.rotation.t()) + pose.translation;
