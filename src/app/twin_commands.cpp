@@ -3,6 +3,7 @@
 #include <iostream>
 #include <memory>
 
+#include "app/gui_server.h"
 #include "core/log.h"
 #include "pipeline/twin_score.h"
 #include "real2sim/build.h"
@@ -21,6 +22,10 @@ struct BuildCli {
 struct CalibrateCli {
   std::string twin, frames, out, config;
   real2sim::CalibrateOptions options;
+};
+
+struct GuiCli {
+  GuiOptions options;
 };
 
 struct ScoreCli {
@@ -81,6 +86,23 @@ void AddTwinCommands(CLI::App& parent, int& exit_code) {
     const auto result = pipeline::ScoreTwin(
         score_cli->twin, reality::ResolveWorldDir(score_cli->world), score_cli->options);
     std::cout << result.ToJson().dump(2) << "\n";
+    exit_code = 0;
+  });
+
+  auto gui_cli = std::make_shared<GuiCli>();
+  auto* gui = parent.add_subcommand(
+      "gui",
+      "the twin editor in the browser: cut parts, add joints and sites, set mass and friction, "
+      "save twin.yaml and export the MJCF (served on 127.0.0.1)");
+  gui->add_option("--twin", gui_cli->options.twin, "twin directory (twin build --out)")
+      ->required()
+      ->check(CLI::ExistingDirectory);
+  gui->add_option("--port", gui_cli->options.port, "port on 127.0.0.1 (0: any free port)")
+      ->check(CLI::Range(0, 65535));
+  gui->add_option("--web", gui_cli->options.web,
+                  "the built page (default: $TWINFORGE_WEB_DIR, else the build's web/)");
+  gui->callback([gui_cli, &exit_code] {
+    ServeTwinEditor(gui_cli->options);
     exit_code = 0;
   });
 

@@ -1,0 +1,147 @@
+#include "app/gui_server.h"
+
+#include <pthread.h>
+#include <spdlog/spdlog.h>
+
+#include <csignal>
+#include <cstdlib>
+#include <iostream>
+#include <mutex>
+#include <thread>
+
+#include "core/error.h"
+#include "real2sim/twin_edit.h"
+
+// Last: it brings <resolv.h>, whose `_res` macro breaks Eigen headers included after it.
+#include <httplib.h>
+
+namespace twinforge::app {
+
+namespace {
+
+void Reply(httplib::Response& res, int status, const core::Json& body) {
+  res.status = status;
+  res.set_content(body.dump(), "application/json");
+}
+
+// Runs `work` under the session lock and turns what it throws into the API's error replies:
+// a refused edit is the user's to fix (400), a missing file or part is 404, the rest 500.
+template <class Work>
+void Handle(std::mutex& lock, httplib::Response& res, Work&& work) {
+  try {
+    std::lock_guard<std::mutex> guard(lock);
+    Reply(res, 200, work());
+  } catch (const core::ConfigError& e) {
+    Reply(res, 400, {{"error", e.what()}});
+  } catch (const core::IoError& e) {
+    Reply(res, 404, {{"error", e.what()}});
+  } catch (const std::exception& e) {
+    spdlog::error("gui: {}", e.what());
+    Reply(res, 500, {{"error", e.what()}});
+  }
+}
+
+core::Json ParseBody(const httplib::Request& req) {
+  core::Json body = core::Json::parse(req.body, nullptr, false);
+  if (body.is_discarded() || !body.is_object())
+    throw core::ConfigError("request to " + req.path, "", "the body is not a JSON object");
+  return body;
+}
+
+}  // namespace
+
+std::filesystem::path ResolveWebDir(const std::filesystem::path& requested) {
+  std::filesystem::path dir = requested;
+  if (dir.empty()) {
+    const char* env = std::getenv("TWINFORGE_WEB_DIR");
+    dir = env && *env ? env : TWINFORGE_WEB_DIR;
+  }
+  if (!std::filesystem::is_regular_file(dir / "index.html"))
+    throw core::IoError(
+        "the twin editor's page is not built: no " + (dir / "index.html").string() +
+        " (scripts/setup.sh installs its npm packages, scripts/build.sh bundles it)");
+  return dir;
+}
+
+void ServeTwinEditor(const GuiOptions& options) {
+  const std::filesystem::path web = ResolveWebDir(options.web);
+  real2sim::TwinEditSession session(options.twin);
+  std::mutex lock;
+
+  httplib::Server server;
+  if (!server.set_mount_point("/", web.string()))
+    throw core::IoError("cannot serve the page from " + web.string());
+  server.Get("/api/twin", [&](const httplib::Request&, httplib::Response& res) {
+    Handle(lock, res, [&] { return session.State(); });
+  });
+  server.Get("/api/scan", [&](const httplib::Request&, httplib::Response& res) {
+    Handle(lock, res, [&] { return session.ScanJson(); });
+  });
+  server.Get("/api/part", [&](const httplib::Request& req, httplib::Response& res) {
+    Handle(lock, res, [&] { return session.PartMeshJson(req.get_param_value("name")); });
+  });
+  server.Post("/api/spec", [&](const httplib::Request& req, httplib::Response& res) {
+    Handle(lock, res, [&] {
+      const core::Json body = ParseBody(req);
+      if (!body.contains("spec"))
+        throw core::ConfigError("request to /api/spec", "spec", "the whole twin spec");
+      session.Propose(body["spec"]);
+      spdlog::info("gui: edit accepted ({} parts, {} joints, {} sites)",
+                   session.spec().parts.size(), session.spec().joints.size(),
+                   session.spec().sites.size());
+      return session.State();
+    });
+  });
+  server.Post("/api/undo", [&](const httplib::Request&, httplib::Response& res) {
+    Handle(lock, res, [&] {
+      session.Undo();
+      return session.State();
+    });
+  });
+  server.Post("/api/save", [&](const httplib::Request&, httplib::Response& res) {
+    Handle(lock, res, [&] {
+      const auto path = session.Save();
+      spdlog::info("gui: saved {}", path.string());
+      return core::Json{{"saved", path.string()}, {"backup", path.string() + ".bak"}};
+    });
+  });
+  server.Post("/api/export", [&](const httplib::Request&, httplib::Response& res) {
+    Handle(lock, res, [&] {
+      core::Json exported = session.Export();
+      spdlog::info("gui: exported {}", exported["scene"].get<std::string>());
+      exported["state"] = session.State();
+      return exported;
+    });
+  });
+
+  // SIGINT/SIGTERM stop the server from a thread of their own; the server's threads inherit the
+  // blocked mask, so the signal reaches only that thread.
+  sigset_t stop_signals;
+  sigemptyset(&stop_signals);
+  sigaddset(&stop_signals, SIGINT);
+  sigaddset(&stop_signals, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &stop_signals, nullptr);
+
+  const std::string host = "127.0.0.1";
+  const int port = options.port == 0                         ? server.bind_to_any_port(host)
+                   : server.bind_to_port(host, options.port) ? options.port
+                                                             : -1;
+  if (port <= 0)
+    throw core::IoError("cannot listen on " + host + ":" + std::to_string(options.port) +
+                        " (in use? --port 0 picks a free one)");
+  std::thread stopper([&] {
+    int signal = 0;
+    sigwait(&stop_signals, &signal);
+    server.stop();
+  });
+  std::cout << "gui: serving http://" << host << ":" << port << "/ (twin " << session.dir().string()
+            << "; Ctrl+C stops)" << std::endl;
+  const bool listened = server.listen_after_bind();
+  if (!listened) pthread_kill(stopper.native_handle(), SIGTERM);
+  stopper.join();
+  if (session.dirty()) spdlog::warn("gui: stopped with unsaved edits (twin.yaml is as last saved)");
+  if (!listened)
+    throw core::IoError("the editor's server on port " + std::to_string(port) + " failed");
+}
+
+}  // namespace twinforge::app
