@@ -5,7 +5,9 @@
 
 #include <csignal>
 #include <cstdlib>
+#include <fstream>
 #include <iostream>
+#include <map>
 #include <mutex>
 #include <thread>
 
@@ -19,9 +21,38 @@ namespace twinforge::app {
 
 namespace {
 
+// Content types carry a charset. Besides being right, that keeps cpp-httplib from compressing
+// them: Debian's build prefers Brotli at its slowest setting, which took 6 s for a 4 MB scan
+// that loopback moves in 0.07 s.
+constexpr const char* kJson = "application/json; charset=utf-8";
+
 void Reply(httplib::Response& res, int status, const core::Json& body) {
   res.status = status;
-  res.set_content(body.dump(), "application/json");
+  res.set_content(body.dump(), kJson);
+}
+
+// The built page's files (index.html, app.js, style.css...), read once.
+void ServePage(httplib::Server& server, const std::filesystem::path& web) {
+  static const std::map<std::string, std::string> types = {
+      {".html", "text/html; charset=utf-8"},
+      {".js", "application/javascript; charset=utf-8"},
+      {".css", "text/css; charset=utf-8"},
+      {".svg", "image/svg+xml; charset=utf-8"},
+      {".png", "image/png"}};
+  for (const auto& entry : std::filesystem::directory_iterator(web)) {
+    const auto type = types.find(entry.path().extension().string());
+    if (!entry.is_regular_file() || type == types.end()) continue;
+    std::ifstream in(entry.path(), std::ios::binary);
+    auto body = std::make_shared<std::string>(std::istreambuf_iterator<char>(in),
+                                              std::istreambuf_iterator<char>());
+    const std::string name = entry.path().filename().string();
+    auto handler = [body, content_type = type->second](const httplib::Request&,
+                                                       httplib::Response& res) {
+      res.set_content(*body, content_type.c_str());
+    };
+    server.Get("/" + name, handler);
+    if (name == "index.html") server.Get("/", handler);
+  }
 }
 
 // Runs `work` under the session lock and turns what it throws into the API's error replies:
@@ -69,8 +100,7 @@ void ServeTwinEditor(const GuiOptions& options) {
   std::mutex lock;
 
   httplib::Server server;
-  if (!server.set_mount_point("/", web.string()))
-    throw core::IoError("cannot serve the page from " + web.string());
+  ServePage(server, web);
   server.Get("/api/twin", [&](const httplib::Request&, httplib::Response& res) {
     Handle(lock, res, [&] { return session.State(); });
   });
