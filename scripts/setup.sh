@@ -19,9 +19,14 @@ packages=(
   libblas3
   # reality bridge
   libzmq3-dev cppzmq-dev libmsgpack-dev
+  # twin editor: HTTP server; Chromium drives its page in the browser test
+  libcpp-httplib-dev chromium
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev
 )
+
+# The editor's page is bundled from npm packages: Debian's Node.js unless the machine has one.
+command -v npm >/dev/null 2>&1 || packages+=(nodejs npm)
 
 missing=()
 for p in "${packages[@]}"; do
@@ -48,5 +53,12 @@ fi
 lapack=$(update-alternatives --list liblapack.so.3-x86_64-linux-gnu 2>/dev/null | grep -m1 openblas-pthread || true)
 if [ -n "$lapack" ]; then
   $sudo update-alternatives --set liblapack.so.3-x86_64-linux-gnu "$lapack" >/dev/null
+fi
+# The editor's npm packages (three.js, esbuild, Playwright's driver without its browsers), exactly
+# as web/package-lock.json pins them; skipped when node_modules is newer than the lock file.
+web="$(dirname "$0")/../web"
+if [ ! "$web/node_modules/.package-lock.json" -nt "$web/package-lock.json" ]; then
+  echo "setup: installing the twin editor's npm packages (web/package-lock.json)"
+  (cd "$web" && PLAYWRIGHT_SKIP_BROWSER_DOWNLOAD=1 npm ci --no-audit --no-fund --loglevel=error)
 fi
 echo "setup: done"
