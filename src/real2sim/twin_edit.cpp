@@ -91,6 +91,12 @@ void TwinEditSession::Propose(const core::Json& proposed) {
   doc.file = kEditOrigin;
   TwinSpec spec = core::ReadConfig<TwinSpec>(doc);
   ValidateTwinSpec(spec, dir_, kEditOrigin);
+  // A part cut down to nothing would only fail later, in the export.
+  for (std::size_t i = 0; i < spec.parts.size(); ++i) {
+    if (CutPart(spec.parts[i]).triangles.empty())
+      throw core::ConfigError(kEditOrigin, "parts[" + std::to_string(i) + "].cuts",
+                              "the cuts leave nothing of " + spec.parts[i].mesh);
+  }
   undo_.push_back(std::move(spec_));
   spec_ = std::move(spec);
 }
@@ -172,13 +178,18 @@ const Mesh& TwinEditSession::SourceMesh(const std::string& relative) {
   return it->second;
 }
 
+Mesh TwinEditSession::CutPart(const PartSpec& part) {
+  Mesh mesh = SourceMesh(part.mesh);
+  for (const auto& cut : part.cuts) mesh = CutMesh(mesh, cut);
+  return mesh;
+}
+
 core::Json TwinEditSession::PartMeshJson(const std::string& part) {
   const PartSpec* spec = nullptr;
   for (const auto& p : spec_.parts)
     if (p.name == part) spec = &p;
   if (!spec) throw core::ConfigError(kEditOrigin, "parts", "no part named '" + part + "'");
-  Mesh mesh = SourceMesh(spec->mesh);
-  for (const auto& cut : spec->cuts) mesh = CutMesh(mesh, cut);
+  const Mesh mesh = CutPart(*spec);
   // Only the vertices the remaining triangles use, renumbered.
   std::vector<int> renumber(mesh.vertices.size(), -1);
   core::Json positions = core::Json::array(), colors = core::Json::array(),

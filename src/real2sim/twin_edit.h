@@ -32,7 +32,8 @@ class TwinEditSession {
 
   // Replaces the spec with `proposed` (the whole spec, as JSON) if it passes twin.yaml's checks;
   // the previous spec goes on the undo stack. Throws ConfigError naming "twin.yaml (edit)" and
-  // the field (e.g. "sites[2].name: a second site named 'grip'"); the spec is then unchanged.
+  // the field (e.g. "sites[2].name: a second site named 'grip'", or a part cut down to nothing);
+  // the spec is then unchanged.
   void Propose(const core::Json& proposed);
   // Back to the spec before the last accepted edit. Throws ConfigError if there is none.
   void Undo();
@@ -55,6 +56,7 @@ class TwinEditSession {
 
  private:
   const Mesh& SourceMesh(const std::string& relative);
+  Mesh CutPart(const PartSpec& part);  // its mesh with its cuts applied
 
   std::filesystem::path dir_;
   TwinSpec spec_;

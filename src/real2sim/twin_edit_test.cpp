@@ -117,6 +117,14 @@ TEST(TwinEdit, AnInvalidEditIsRefusedWithTheFieldAndChangesNothing) {
   loop["joints"].push_back({{"name", "back"}, {"parent", "piece"}, {"child", "block"}});
   EXPECT_NE(ProposalError(session, loop).find("loop"), std::string::npos);
 
+  core::Json nothing_left = core::ToJson(session.spec());
+  nothing_left["parts"][1]["cuts"].push_back(
+      {{"op", "intersect"}, {"box", {{"center", {2, 2, 2}}, {"size", {0.1, 0.1, 0.1}}}}});
+  const std::string emptied = ProposalError(session, nothing_left);
+  EXPECT_NE(emptied.find("parts[1].cuts"), std::string::npos) << emptied;
+  EXPECT_NE(emptied.find("the cuts leave nothing of meshes/block.ply"), std::string::npos)
+      << emptied;
+
   EXPECT_EQ(session.State(), before);
 }
 
@@ -154,7 +162,8 @@ TEST(TwinEdit, SavingKeepsThePreviousSpecAsABackup) {
   EXPECT_EQ(saved.sites[0].part, "piece");
   // Nothing but the temp-then-rename writes touched the directory.
   int files = 0;
-  for (const auto& entry : std::filesystem::directory_iterator(dir)) files += entry.is_regular_file();
+  for (const auto& entry : std::filesystem::directory_iterator(dir))
+    files += entry.is_regular_file();
   EXPECT_EQ(files, 4);  // twin.yaml, twin.yaml.bak, scan.ply, scene.xml
 }
 

@@ -293,6 +293,21 @@ $('cut').addEventListener('click', action(async () => {
   select(piece);
 }));
 
+// One cut on the selected part alone: "subtract" removes what is inside the box (a wall of the
+// table caught in the part), "intersect" keeps only what is inside.
+for (const op of ['subtract', 'intersect']) {
+  $(`cut-${op}`).addEventListener('click', action(async () => {
+    const name = requireSelected();
+    if (!viewer.toolVisible('cut')) throw new LocalError('place a box first (Add box)');
+    const box = readBox();
+    await postSpec((spec) => {
+      const p = findPart(spec, name);
+      p.cuts = [...(p.cuts || []), { op, box: structuredClone(box) }];
+    }, `${op === 'subtract' ? 'removed the box from' : 'kept the box of'} ${name}`);
+    viewer.showTool('cut', false);
+  }));
+}
+
 // ---- joint tool -----------------------------------------------------------------
 function syncJointTool() {
   try {

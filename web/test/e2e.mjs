@@ -181,6 +181,28 @@ async function main() {
   check(/unsaved changes/.test(await statusText()), `no dirty marker after an edit: '${await statusText()}'`);
   log('cut accepted:', (await statusText()).trim());
 
+  // ---- trim another part: one subtract cut on it alone, no new part ----------------
+  const other = originalSpec.parts.find((p) => p.name !== first)?.name;
+  let trimBox = null;
+  if (other) {
+    await click(`#parts [data-part="${other}"]`);
+    await click('#add-box');
+    await idle();
+    const value = async (id) => Number(await page.inputValue(`#${id}`));
+    trimBox = {
+      center: [await value('box-cx'), await value('box-cy'), await value('box-cz')],
+      size: [await value('box-sx'), await value('box-sy'), await value('box-sz')],
+    };
+    const before = (await getJson(`${url}api/twin`)).spec.parts.length;
+    await click('#cut-subtract');
+    await idle();
+    check(!(await errorText()), `error after trimming ${other}: ${await errorText()}`);
+    const after = (await getJson(`${url}api/twin`)).spec;
+    check(after.parts.length === before, `trimming ${other} changed the number of parts`);
+    check(after.parts.find((p) => p.name === other).cuts.at(-1)?.op === 'subtract', `${other} has no subtract cut after the trim`);
+    log(`trimmed '${other}' with box`, JSON.stringify(trimBox));
+  }
+
   // a click on the new part in the 3D view selects it (raycast)
   await click(`#parts [data-part="${first}"]`);
   const spot = await page.evaluate(() => window.__twinforge.screenPointOf('piece'));
@@ -268,6 +290,13 @@ async function main() {
     `piece's last cut is not intersect with the box: ${JSON.stringify(piece.cuts.at(-1))}`);
   check(piece.mesh === origBefore.mesh, `piece's mesh ${piece.mesh} is not ${origBefore.mesh}`);
   check(piece.fixed === false && Math.abs(piece.mass - 0.5) < 1e-9, 'piece is not a movable 0.5 kg part');
+  if (other) {
+    const trimmed = spec.parts.find((p) => p.name === other);
+    const n = (originalSpec.parts.find((p) => p.name === other).cuts || []).length;
+    check(trimmed.cuts.length === n + 1 && trimmed.cuts.at(-1).op === 'subtract' &&
+      near(trimmed.cuts.at(-1).box.center, trimBox.center, 1e-6) && near(trimmed.cuts.at(-1).box.size, trimBox.size, 1e-6),
+      `${other}'s trim is not in twin.yaml: ${JSON.stringify(trimmed.cuts.at(-1))}`);
+  }
   const slide = (spec.joints || []).find((j) => j.name === 'slide');
   check(slide && slide.type === 'prismatic' && slide.parent === first && slide.child === 'piece',
     `joint slide is wrong: ${JSON.stringify(slide)}`);
