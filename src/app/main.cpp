@@ -7,6 +7,7 @@
 #include "app/pipeline_commands.h"
 #include "app/reality_commands.h"
 #include "app/sim_commands.h"
+#include "app/sysid_command.h"
 #include "app/train_commands.h"
 #include "app/twin_commands.h"
 #include "core/error.h"
@@ -36,6 +37,7 @@ int main(int argc, char** argv) {
   app::AddRealityCommands(app, exit_code);
   app::AddDataCommands(app, exit_code);
   app::AddTwinCommands(app, exit_code);
+  app::AddSysidCommand(app, exit_code);
   app::AddTrainCommands(app, exit_code);
   app::AddPipelineCommands(app, exit_code);
 

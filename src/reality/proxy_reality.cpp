@@ -26,64 +26,14 @@ std::filesystem::path ResolveWorldDir(const std::string& name) {
                           "no world directory '" + name + "' (nor assets/worlds/" + name + ")");
 }
 
-// The proxy arm's own low-level controller: commands take effect after the latency, and the
-// target the joints servo to moves smoothly toward the command instead of jumping.
-class ProxyReality::Controller : public sim::Env::SubstepHook {
- public:
-  Controller(const ControllerSpec& spec, const sim::RobotIndex& robot, double timestep)
-      : spec_(spec),
-        robot_(robot),
-        latency_substeps_(static_cast<int>(std::lround(spec.latency / timestep))) {}
-
-  void Reset(const mjData* d) {
-    for (int k = 0; k < sim::kArmDof; ++k) {
-      applied_[k] = d->qpos[robot_.arm_qpos[k]];
-      active_[k] = previous_[k] = applied_[k];
-    }
-    finger_ = previous_finger_ = d->ctrl[robot_.finger_actuator[0]];
-    substep_ = 0;
-  }
-  // A new command: remember the one still being followed until the latency has passed.
-  void Command(const sim::JointTargets& targets) {
-    previous_ = active_;
-    previous_finger_ = finger_;
-    active_ = targets.arm;
-    finger_ = targets.finger;
-    substep_ = 0;
-  }
-  void BeforeSubstep(const mjModel*, mjData* d) override {
-    const bool started = substep_++ >= latency_substeps_;
-    const sim::ArmVector& goal = started ? active_ : previous_;
-    applied_ += spec_.interpolation * (goal - applied_);
-    for (int k = 0; k < sim::kArmDof; ++k) d->ctrl[robot_.arm_actuator[k]] = applied_[k];
-    for (int k = 0; k < 2; ++k)
-      d->ctrl[robot_.finger_actuator[k]] = started ? finger_ : previous_finger_;
-  }
-
- private:
-  ControllerSpec spec_;
-  sim::RobotIndex robot_;
-  int latency_substeps_;
-  sim::ArmVector applied_ = sim::ArmVector::Zero(), active_ = sim::ArmVector::Zero(),
-                 previous_ = sim::ArmVector::Zero();
-  double finger_ = 0, previous_finger_ = 0;
-  int substep_ = 0;
-};
-
 namespace {
 
 // The world's hidden controller and arm physics, written into its compiled model.
 sim::Task::ModelEdit HiddenRobotPhysics(const ControllerSpec& c) {
   return [c](mjModel* m, const sim::TaskIndex& index) {
     const auto& r = index.robot;
-    for (int k = 0; k < sim::kArmDof; ++k) {
-      const int a = r.arm_actuator[k];
-      m->actuator_gainprm[mjNGAIN * a] *= c.kp_scale;
-      m->actuator_biasprm[mjNBIAS * a + 1] *= c.kp_scale;
-      m->actuator_biasprm[mjNBIAS * a + 2] *= c.kd_scale;
-      m->dof_damping[r.arm_dof[k]] *= c.arm_damping_scale;
-      m->dof_frictionloss[r.arm_dof[k]] *= c.arm_frictionloss_scale;
-    }
+    sim::ScaleArmPhysics(m, r,
+                         {c.kp_scale, c.kd_scale, c.arm_damping_scale, c.arm_frictionloss_scale});
     for (int k = 0; k < 2; ++k) {
       const int a = r.finger_actuator[k];
       m->actuator_forcerange[2 * a] = -c.gripper_force;
@@ -142,8 +92,9 @@ ProxyReality::ProxyReality(const std::filesystem::path& world_dir)
   task_ =
       std::make_shared<const sim::Task>(std::move(task_spec), HiddenRobotPhysics(spec_.controller));
   env_ = std::make_unique<sim::Env>(task_);
-  controller_ = std::make_unique<Controller>(spec_.controller, task_->index().robot,
-                                             task_->spec().control.timestep);
+  controller_ = std::make_unique<sim::ServoLag>(
+      sim::ServoLagSpec{spec_.controller.interpolation, spec_.controller.latency},
+      task_->index().robot, task_->spec().control.timestep);
   operator_ = std::make_unique<ScriptedOperator>(*task_, spec_.operator_style);
   reported_camera_ = sim::MakeCamera(task_->spec().camera);
   sim::Camera truth = reported_camera_;

@@ -20,6 +20,7 @@
 #include "reality/robot.h"
 #include "reality/teleop.h"
 #include "sim/env.h"
+#include "sim/servo_lag.h"
 
 namespace twinforge::reality {
 
@@ -153,11 +154,10 @@ class ProxyReality : public Robot {
   const sim::Env& hidden_env() const { return *env_; }
 
  private:
-  class Controller;
   WorldSpec spec_;
   std::shared_ptr<const sim::Task> task_;
   std::unique_ptr<sim::Env> env_;
-  std::unique_ptr<Controller> controller_;
+  std::unique_ptr<sim::ServoLag> controller_;  // the arm's hidden low-level controller
   sim::Camera reported_camera_;
   std::unique_ptr<sim::RayCaster> caster_;       // at the camera's true pose
   std::unique_ptr<sim::RayCaster> scan_caster_;  // the scan camera, built for its intrinsics

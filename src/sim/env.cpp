@@ -62,6 +62,7 @@ void Env::RestoreNominalModel() {
   CopyArray(m->geom_rbound, n->geom_rbound, m->ngeom);
   CopyArray(m->geom_rgba, n->geom_rgba, 4 * m->ngeom);
   CopyArray(m->dof_damping, n->dof_damping, m->nv);
+  CopyArray(m->dof_frictionloss, n->dof_frictionloss, m->nv);
   CopyArray(m->actuator_gainprm, n->actuator_gainprm, mjNGAIN * m->nu);
   CopyArray(m->actuator_biasprm, n->actuator_biasprm, mjNBIAS * m->nu);
 }

@@ -80,6 +80,9 @@ class Env {
   const mjModel* model() const { return model_.get(); }
   const mjData* data() const { return data_.get(); }
   mjData* mutable_data() { return data_.get(); }
+  // This env's model, to edit physical parameters (masses, damping, gains...) between Reset and
+  // the steps; the next Reset restores the task's nominal values.
+  mjModel* mutable_model() { return model_.get(); }
   const Kinematics& kinematics() const { return kinematics_; }
   const GripperState& gripper() const { return gripper_; }
   int steps() const { return steps_; }

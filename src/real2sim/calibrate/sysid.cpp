@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <numeric>
 #include <random>
 
@@ -116,22 +117,25 @@ double TrajectoryError(const mjModel* m, const std::vector<Trajectory>& trajecto
   return n > 0 ? sum / n : 0;
 }
 
-SysidResult IdentifyParameters(mjModel* m, const std::vector<PhysicalParameter>& parameters,
-                               const std::vector<Trajectory>& trajectories,
-                               const SysidOptions& options) {
-  const size_t n = parameters.size();
+SysidResult MinimizeLogSpace(const std::function<double(const std::vector<double>&)>& objective,
+                             const std::vector<double>& start, const std::vector<double>& lower,
+                             const std::vector<double>& upper, const SysidOptions& options) {
+  const size_t n = start.size();
+  if (lower.size() != n || upper.size() != n)
+    throw core::ConfigError("sysid", "lower", "one bound of each kind per parameter");
   SysidResult result;
   // Log-parameters, clamped to the bounds.
   std::vector<double> x(n), lo(n), hi(n);
   for (size_t i = 0; i < n; ++i) {
-    lo[i] = std::log(parameters[i].lower);
-    hi[i] = std::log(parameters[i].upper);
-    x[i] = std::clamp(std::log(std::max(GetParameter(m, parameters[i]), 1e-12)), lo[i], hi[i]);
+    lo[i] = std::log(lower[i]);
+    hi[i] = std::log(upper[i]);
+    x[i] = std::clamp(std::log(std::max(start[i], 1e-12)), lo[i], hi[i]);
   }
+  std::vector<double> values(n);
   auto error = [&](const std::vector<double>& at) {
-    for (size_t i = 0; i < n; ++i) SetParameter(m, parameters[i], std::exp(at[i]));
+    for (size_t i = 0; i < n; ++i) values[i] = std::exp(at[i]);
     ++result.replays;
-    return TrajectoryError(m, trajectories);
+    return objective(values);
   };
   auto clamp = [&](std::vector<double>& at) {
     for (size_t i = 0; i < n; ++i) at[i] = std::clamp(at[i], lo[i], hi[i]);
@@ -211,9 +215,102 @@ SysidResult IdentifyParameters(mjModel* m, const std::vector<PhysicalParameter>&
       result.error.push_back(best_error);
     }
   }
-  for (size_t i = 0; i < n; ++i) SetParameter(m, parameters[i], std::exp(best[i]));
   result.values.resize(n);
   for (size_t i = 0; i < n; ++i) result.values[i] = std::exp(best[i]);
+  return result;
+}
+
+LeastSquaresResult LeastSquaresLogSpace(
+    const std::function<Eigen::VectorXd(const std::vector<double>&)>& residuals,
+    const std::vector<double>& start, const std::vector<double>& lower,
+    const std::vector<double>& upper, const SysidOptions& options) {
+  const int n = static_cast<int>(start.size());
+  if (static_cast<int>(lower.size()) != n || static_cast<int>(upper.size()) != n)
+    throw core::ConfigError("sysid", "lower", "one bound of each kind per parameter");
+  LeastSquaresResult result;
+  Eigen::VectorXd x(n), lo(n), hi(n);
+  for (int i = 0; i < n; ++i) {
+    lo[i] = std::log(lower[i]);
+    hi[i] = std::log(upper[i]);
+    x[i] = std::clamp(std::log(std::max(start[i], 1e-12)), lo[i], hi[i]);
+  }
+  auto evaluate = [&](const Eigen::VectorXd& at) {
+    std::vector<double> values(n);
+    for (int i = 0; i < n; ++i) values[i] = std::exp(at[i]);
+    ++result.replays;
+    return residuals(values);
+  };
+  // Central differences, stepping inward at a bound.
+  auto jacobian = [&](const Eigen::VectorXd& at, long rows) {
+    Eigen::MatrixXd j(rows, n);
+    for (int i = 0; i < n; ++i) {
+      Eigen::VectorXd up = at, down = at;
+      up[i] = std::min(at[i] + options.difference, hi[i]);
+      down[i] = std::max(at[i] - options.difference, lo[i]);
+      j.col(i) = (evaluate(up) - evaluate(down)) / std::max(up[i] - down[i], 1e-12);
+    }
+    return j;
+  };
+  Eigen::VectorXd r = evaluate(x);
+  double cost = r.squaredNorm();
+  double lambda = 1e-2;
+  Eigen::MatrixXd j = jacobian(x, r.size());
+  for (int it = 0; it < options.iterations; ++it) {
+    const Eigen::MatrixXd a = j.transpose() * j;
+    const Eigen::VectorXd g = j.transpose() * r;
+    bool improved = false;
+    // Damped Gauss-Newton steps, more damped until one lowers the cost.
+    for (int tries = 0; tries < 8 && !improved; ++tries) {
+      Eigen::MatrixXd damped = a;
+      damped.diagonal() += lambda * (a.diagonal().array() + 1e-12).matrix();
+      Eigen::VectorXd next = x + damped.ldlt().solve(-g);
+      next = next.cwiseMax(lo).cwiseMin(hi);
+      const Eigen::VectorXd rn = evaluate(next);
+      if (rn.squaredNorm() < cost) {
+        x = next;
+        r = rn;
+        cost = rn.squaredNorm();
+        lambda = std::max(lambda / 3, 1e-7);
+        improved = true;
+      } else {
+        lambda *= 4;
+      }
+    }
+    result.error.push_back(r.size() ? cost / r.size() : 0);
+    if (!improved) break;
+    j = jacobian(x, r.size());
+  }
+  const double dof = std::max<double>(1, static_cast<double>(r.size()) - n);
+  const Eigen::MatrixXd covariance =
+      cost / dof * (j.transpose() * j).completeOrthogonalDecomposition().pseudoInverse();
+  for (int i = 0; i < n; ++i) {
+    result.values.push_back(std::exp(x[i]));
+    const double c = covariance(i, i);
+    result.relative_error.push_back(j.col(i).squaredNorm() > 0 && std::isfinite(c) ? std::sqrt(c)
+                                                                                   : HUGE_VAL);
+  }
+  return result;
+}
+
+SysidResult IdentifyParameters(mjModel* m, const std::vector<PhysicalParameter>& parameters,
+                               const std::vector<Trajectory>& trajectories,
+                               const SysidOptions& options) {
+  std::vector<double> start, lower, upper;
+  for (const auto& p : parameters) {
+    start.push_back(GetParameter(m, p));
+    lower.push_back(p.lower);
+    upper.push_back(p.upper);
+  }
+  auto set = [&](const std::vector<double>& values) {
+    for (size_t i = 0; i < parameters.size(); ++i) SetParameter(m, parameters[i], values[i]);
+  };
+  SysidResult result = MinimizeLogSpace(
+      [&](const std::vector<double>& values) {
+        set(values);
+        return TrajectoryError(m, trajectories);
+      },
+      start, lower, upper, options);
+  set(result.values);
   return result;
 }
 

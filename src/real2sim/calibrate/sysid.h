@@ -9,6 +9,8 @@
 // (diagonal covariance) when the error is too rough for gradients.
 #pragma once
 
+#include <Eigen/Dense>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -63,6 +65,24 @@ struct SysidResult {
   std::vector<double> error;   // trajectory error per iteration (the best so far)
   int replays = 0;             // trajectory replays spent
 };
+
+// Minimizes `objective` over positive values, searched in log space within [lower, upper] from
+// `start`, by the method of `options`. Returns the best values found and the error history.
+SysidResult MinimizeLogSpace(const std::function<double(const std::vector<double>&)>& objective,
+                             const std::vector<double>& start, const std::vector<double>& lower,
+                             const std::vector<double>& upper, const SysidOptions& options = {});
+
+// Least squares over positive values in log space: Levenberg-Marquardt on `residuals` with the
+// Jacobian by central differences (`options.difference`), `options.iterations` at most. Also
+// returns each value's relative standard error, sigma^2 (J^T J)^-1 at the optimum (infinite
+// where the residuals do not pin it down).
+struct LeastSquaresResult : SysidResult {
+  std::vector<double> relative_error;
+};
+LeastSquaresResult LeastSquaresLogSpace(
+    const std::function<Eigen::VectorXd(const std::vector<double>&)>& residuals,
+    const std::vector<double>& start, const std::vector<double>& lower,
+    const std::vector<double>& upper, const SysidOptions& options = {});
 
 // Identifies `parameters` of `m` (their current values are the start) from `trajectories`.
 // `m` is left with the identified values.

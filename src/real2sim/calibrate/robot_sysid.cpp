@@ -1,0 +1,269 @@
+#include "real2sim/calibrate/robot_sysid.h"
+
+#include <spdlog/spdlog.h>
+
+#include <cmath>
+#include <memory>
+
+#include "core/error.h"
+#include "core/progress.h"
+#include "sim/expert.h"
+
+namespace twinforge::real2sim {
+
+namespace {
+
+// The robot and the twin start from the task's nominal state; no randomization.
+constexpr int kLevel = 0;
+constexpr uint64_t kSeed = 0;
+
+// The values below are searched as one vector: servo (2), arm scales (3), then the scene's.
+constexpr int kControllerValues = 5;
+
+std::vector<double> ControllerVector(const RobotPhysics& p) {
+  return {p.servo.interpolation, p.servo.latency, p.arm.kp, p.arm.kd, p.arm.frictionloss};
+}
+
+void SetController(RobotPhysics& p, const std::vector<double>& v) {
+  p.servo.interpolation = std::min(v[0], 1.0);
+  p.servo.latency = v[1];
+  p.arm.kp = v[2];
+  p.arm.kd = v[3];
+  p.arm.frictionloss = v[4];
+}
+
+}  // namespace
+
+std::vector<sim::JointTargets> FreeArmTargets(const sim::TaskSpec& twin, double amplitude,
+                                              int hold) {
+  auto task = std::make_shared<const sim::Task>(twin);
+  sim::Env env(task);
+  env.Reset(kSeed, kLevel);
+  const sim::ArmVector home = env.ArmPositions();
+  sim::JointTargets rest;
+  rest.arm = home;
+  rest.finger = env.data()->ctrl[task->index().robot.finger_actuator[0]];
+  const sim::RobotIndex& robot = task->index().robot;
+  std::vector<sim::JointTargets> out;
+  for (int k = 0; k < sim::kArmDof; ++k) {
+    // The side that keeps the tool higher, within the joint's range.
+    double best_height = -1e9, best_sign = 1;
+    for (double sign : {1.0, -1.0}) {
+      sim::ArmVector q = home;
+      q[k] += sign * amplitude;
+      if (q[k] < robot.lower[k] || q[k] > robot.upper[k]) continue;
+      const double height = env.kinematics().EePose(q).translation.z();
+      if (height > best_height) {
+        best_height = height;
+        best_sign = sign;
+      }
+    }
+    sim::JointTargets out_and_back = rest;
+    out_and_back.arm[k] += best_sign * amplitude;
+    for (int i = 0; i < hold; ++i) out.push_back(out_and_back);
+    for (int i = 0; i < hold; ++i) out.push_back(rest);
+  }
+  return out;
+}
+
+std::vector<sim::JointTargets> ExpertTargets(const sim::TaskSpec& twin, int repeat, bool* success) {
+  if (repeat < 1) throw core::ConfigError("sysid", "repeat", "a positive repeat count");
+  auto task = std::make_shared<const sim::Task>(twin);
+  sim::Env env(task);
+  sim::ScriptedExpert expert(*task);
+  core::Rng rng = sim::BeginExpertEpisode(env, expert, kSeed, 0, kLevel);
+  std::vector<sim::JointTargets> out;
+  bool reached = false;
+  for (int step = 0; step < task->spec().horizon && !expert.finished(); ++step) {
+    const sim::Action action = expert.Act(env, rng);
+    const sim::JointTargets targets = sim::ActionToJointTargets(
+        env.kinematics(), env.ArmPositions(), action, task->spec().control.limits, env.gripper());
+    for (int r = 0; r < repeat; ++r) {
+      out.push_back(targets);
+      reached = env.StepTargets(targets).success || reached;
+    }
+  }
+  if (success) *success = reached;
+  return out;
+}
+
+bool GripHeld(const RobotTrajectory& t) {
+  if (t.targets.empty() || t.gripper_width.size() != t.targets.size()) return false;
+  double closed = t.targets[0].finger;
+  for (const auto& target : t.targets) closed = std::min(closed, target.finger);
+  if (closed == t.targets[0].finger) return false;  // never closed
+  for (size_t i = t.targets.size(); i-- > 0;)
+    if (t.targets[i].finger == closed) return t.gripper_width[i] > 0.005;
+  return false;
+}
+
+TwinReplay::TwinReplay(const sim::TaskSpec& twin)
+    : task_(std::make_shared<const sim::Task>(twin)), env_(task_) {}
+
+std::vector<sim::ArmVector> TwinReplay::Run(const RobotPhysics& physics,
+                                            const std::vector<PhysicalParameter>& scene,
+                                            const std::vector<sim::JointTargets>& targets) {
+  if (physics.scene.size() != scene.size())
+    throw core::ConfigError("sysid", "scene", "one value per scene parameter");
+  env_.Reset(kSeed, kLevel);
+  mjModel* m = env_.mutable_model();
+  sim::ScaleArmPhysics(m, task_->index().robot, physics.arm);
+  for (size_t i = 0; i < scene.size(); ++i) SetParameter(m, scene[i], physics.scene[i]);
+  sim::ServoLag servo(physics.servo, task_->index().robot, task_->spec().control.timestep);
+  servo.Reset(env_.data());
+  std::vector<sim::ArmVector> q;
+  q.reserve(targets.size());
+  for (const auto& t : targets) {
+    servo.Command(t);
+    env_.StepTargets(t, &servo);
+    q.push_back(env_.ArmPositions());
+  }
+  return q;
+}
+
+Eigen::VectorXd TwinReplay::Residuals(const RobotPhysics& physics,
+                                      const std::vector<PhysicalParameter>& scene,
+                                      const std::vector<RobotTrajectory>& trajectories) {
+  long n = 0;
+  for (const auto& t : trajectories) {
+    if (t.q.size() != t.targets.size())
+      throw core::ConfigError("sysid", t.name, "one measured position per target");
+    n += sim::kArmDof * static_cast<long>(t.q.size());
+  }
+  Eigen::VectorXd r(n);
+  long at = 0;
+  for (const auto& t : trajectories) {
+    const auto q = Run(physics, scene, t.targets);
+    for (size_t i = 0; i < q.size(); ++i, at += sim::kArmDof)
+      r.segment<sim::kArmDof>(at) = q[i] - t.q[i];
+  }
+  return r;
+}
+
+double TwinReplay::Error(const RobotPhysics& physics, const std::vector<PhysicalParameter>& scene,
+                         const std::vector<RobotTrajectory>& trajectories) {
+  const Eigen::VectorXd r = Residuals(physics, scene, trajectories);
+  return r.size() > 0 ? r.squaredNorm() / r.size() : 0;
+}
+
+std::vector<double> TwinReplay::NominalScene(const std::vector<PhysicalParameter>& scene) const {
+  std::vector<double> values;
+  for (const auto& p : scene) values.push_back(GetParameter(task_->model(), p));
+  return values;
+}
+
+RobotSysidResult IdentifyRobotPhysics(const sim::TaskSpec& twin,
+                                      const std::vector<PhysicalParameter>& scene,
+                                      const std::vector<RobotTrajectory>& free_moves,
+                                      const std::vector<RobotTrajectory>& task_runs,
+                                      const RobotSysidOptions& options, core::Progress* progress) {
+  RobotSysidResult r;
+  r.scene = scene;
+  TwinReplay replay(twin);
+  r.start.scene = replay.NominalScene(scene);
+  RobotPhysics physics = r.start;
+  r.free_error_before = replay.Error(physics, scene, free_moves);
+  r.task_error_before = replay.Error(physics, scene, task_runs);
+  int done = 0;
+  auto tick = [&](const char* stage) {
+    if (progress && ++done % 10 == 0) progress->Set(done, stage);
+  };
+
+  // The controller, from the free moves: interpolation in (0, 1], latency up to 0.1 s, the
+  // arm's scales within a factor 4 of the model's.
+  if (!free_moves.empty()) {
+    const std::vector<double> lower{0.01, 0.001, 0.25, 0.25, 0.25}, upper{1.0, 0.1, 4, 4, 4};
+    LeastSquaresResult fit = LeastSquaresLogSpace(
+        [&](const std::vector<double>& v) {
+          RobotPhysics p = physics;
+          SetController(p, v);
+          tick("controller");
+          return replay.Residuals(p, scene, free_moves);
+        },
+        ControllerVector(physics), lower, upper, options.controller);
+    r.replays += fit.replays;
+    // The fit bends where the latency crosses a whole physics step, and can stall there: refit
+    // the others with the latency held at the nearest whole steps and keep the best.
+    const double dt = twin.control.timestep;
+    const int nearest = static_cast<int>(std::lround(fit.values[1] / dt));
+    for (int steps = std::max(0, nearest - 1); steps <= nearest + 1; ++steps) {
+      const double latency = std::max(steps * dt, lower[1]);
+      std::vector<double> start = fit.values, lo = lower, hi = upper;
+      start[1] = lo[1] = hi[1] = latency;
+      LeastSquaresResult held = LeastSquaresLogSpace(
+          [&](const std::vector<double>& v) {
+            RobotPhysics p = physics;
+            SetController(p, v);
+            tick("controller");
+            return replay.Residuals(p, scene, free_moves);
+          },
+          start, lo, hi, options.controller);
+      r.replays += held.replays;
+      if (!held.error.empty() && held.error.back() < fit.error.back()) {
+        held.relative_error[1] = 0.5 * dt / latency;  // to within half a step
+        fit = std::move(held);
+      }
+    }
+    SetController(physics, fit.values);
+    r.controller_curve = fit.error;
+    r.controller_relative_error = fit.relative_error;
+  }
+  // The scene, from the task runs, with that controller. A value the runs do not pin down to
+  // `max_relative_error` keeps the twin's.
+  if (!task_runs.empty() && !scene.empty()) {
+    std::vector<double> lower, upper;
+    for (const auto& p : scene) {
+      lower.push_back(p.lower);
+      upper.push_back(p.upper);
+    }
+    const LeastSquaresResult fit = LeastSquaresLogSpace(
+        [&](const std::vector<double>& v) {
+          RobotPhysics p = physics;
+          p.scene = v;
+          tick("scene");
+          return replay.Residuals(p, scene, task_runs);
+        },
+        physics.scene, lower, upper, options.scene);
+    r.scene_curve = fit.error;
+    r.scene_fitted = fit.values;
+    r.scene_relative_error = fit.relative_error;
+    r.replays += fit.replays;
+    for (size_t i = 0; i < scene.size(); ++i) {
+      const bool identified = fit.relative_error[i] <= options.max_relative_error;
+      r.scene_identified.push_back(identified);
+      if (identified) physics.scene[i] = fit.values[i];
+    }
+  }
+  r.identified = physics;
+  r.free_error_after = replay.Error(physics, scene, free_moves);
+  r.task_error_after = replay.Error(physics, scene, task_runs);
+  return r;
+}
+
+core::Json ToJson(const RobotSysidResult& r) {
+  auto physics = [&](const RobotPhysics& p) {
+    core::Json scene = core::Json::object();
+    for (size_t i = 0; i < r.scene.size(); ++i)
+      scene[std::string(ToString(r.scene[i].kind)) + ":" + r.scene[i].name] = p.scene[i];
+    return core::Json{
+        {"servo", core::ToJson(p.servo)},
+        {"arm_scales", {{"kp", p.arm.kp}, {"kd", p.arm.kd}, {"frictionloss", p.arm.frictionloss}}},
+        {"scene", scene}};
+  };
+  auto rms_deg = [](double mse) { return std::sqrt(mse) * 180 / M_PI; };
+  return {{"start", physics(r.start)},
+          {"identified", physics(r.identified)},
+          {"free_moves_rms_deg",
+           {{"before", rms_deg(r.free_error_before)}, {"after", rms_deg(r.free_error_after)}}},
+          {"task_runs_rms_deg",
+           {{"before", rms_deg(r.task_error_before)}, {"after", rms_deg(r.task_error_after)}}},
+          {"controller_relative_error", r.controller_relative_error},
+          {"scene_fitted", r.scene_fitted},
+          {"scene_relative_error", r.scene_relative_error},
+          {"scene_identified", r.scene_identified},
+          {"controller_curve", r.controller_curve},
+          {"scene_curve", r.scene_curve},
+          {"replays", r.replays}};
+}
+
+}  // namespace twinforge::real2sim

@@ -1,0 +1,123 @@
+// System identification of a twin against its robot: the arm's low-level controller (servo
+// latency and interpolation, gain, damping and dry-friction scales) and the scene's physical
+// parameters (a drawer's damping, dry friction and mass...) that make the twin's arm move as the
+// real one did under the same joint targets.
+//
+// Two kinds of experiment, both open loop from the task's level-0 start so that robot and twin
+// begin alike:
+// - free-arm moves: each joint stepped out and back in turn, nothing touched; they fix the
+//   controller;
+// - task runs: the task's scripted expert run in the twin (say, grasp and pull the drawer), its
+//   joint targets replayed on the robot, at full and at half speed; with the controller known,
+//   how the arm lagged while pulling tells the scene's parameters.
+// The real arm's joint positions after every control period are what is matched.
+#pragma once
+
+#include <Eigen/Dense>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "core/config.h"
+#include "core/progress.h"
+#include "real2sim/calibrate/sysid.h"
+#include "sim/servo_lag.h"
+#include "sim/task.h"
+
+namespace twinforge::real2sim {
+
+struct RobotTrajectory {
+  std::string name;
+  std::vector<sim::JointTargets> targets;  // one per control period
+  std::vector<sim::ArmVector> q;           // measured after each
+  std::vector<double> gripper_width;       // measured after each (m)
+  bool task_success = false;               // the task's goal was reached (robot's answer)
+};
+
+// Whether the gripper still held something (> 5 mm between the fingers) at the last step it was
+// commanded closed. A task run whose grip slipped off says little about what it pulled.
+bool GripHeld(const RobotTrajectory& t);
+
+// The arm's controller and physics as the twin models them, and the values of `scene`
+// parameters (in their order).
+struct RobotPhysics {
+  sim::ServoLagSpec servo;
+  sim::ArmPhysicsScales arm;
+  std::vector<double> scene;
+};
+
+// Free-arm moves: from the level-0 start, each joint in turn is commanded `amplitude` rad out
+// (toward the side that keeps the tool higher) for `hold` control periods, then back.
+std::vector<sim::JointTargets> FreeArmTargets(const sim::TaskSpec& twin, double amplitude = 0.15,
+                                              int hold = 6);
+// The scripted expert's joint targets in the twin from the level-0 start, each sent `repeat`
+// times (2: half speed); `success` says whether the expert reached the goal in the twin.
+std::vector<sim::JointTargets> ExpertTargets(const sim::TaskSpec& twin, int repeat,
+                                             bool* success = nullptr);
+
+// The twin, replaying joint targets from the level-0 start with given physics.
+class TwinReplay {
+ public:
+  explicit TwinReplay(const sim::TaskSpec& twin);
+  // The arm's positions after each target, with `physics` (`scene` parameters set by name).
+  std::vector<sim::ArmVector> Run(const RobotPhysics& physics,
+                                  const std::vector<PhysicalParameter>& scene,
+                                  const std::vector<sim::JointTargets>& targets);
+  // The twin's joint positions minus the measured ones, every step and joint of every trajectory.
+  Eigen::VectorXd Residuals(const RobotPhysics& physics,
+                            const std::vector<PhysicalParameter>& scene,
+                            const std::vector<RobotTrajectory>& trajectories);
+  // Mean squared joint-position error (rad^2) against the trajectories.
+  double Error(const RobotPhysics& physics, const std::vector<PhysicalParameter>& scene,
+               const std::vector<RobotTrajectory>& trajectories);
+  // The twin's own values of `scene`.
+  std::vector<double> NominalScene(const std::vector<PhysicalParameter>& scene) const;
+
+ private:
+  std::shared_ptr<const sim::Task> task_;
+  sim::Env env_;
+};
+
+struct RobotSysidOptions {
+  // Levenberg-Marquardt iterations and central-difference steps (log space) of each stage.
+  SysidOptions controller{.iterations = 25, .difference = 0.02};
+  SysidOptions scene{.iterations = 25, .difference = 0.02};
+  double max_relative_error = 0.15;
+  template <class A>
+  void Serialize(A& a) {
+    a("controller_iterations", controller.iterations);
+    a("scene_iterations", scene.iterations);
+    a("max_relative_error", max_relative_error);
+    a.Require(controller.iterations > 0 && scene.iterations > 0, "controller_iterations",
+              "positive iteration counts");
+  }
+};
+
+struct RobotSysidResult {
+  RobotPhysics start, identified;
+  std::vector<PhysicalParameter> scene;
+  double free_error_before = 0, free_error_after = 0;  // rad^2, free-arm moves
+  double task_error_before = 0, task_error_after = 0;  // rad^2, task runs
+  std::vector<double> controller_curve, scene_curve;   // best error per iteration
+  // How well the runs pin each value down: the relative standard error from the fit's curvature
+  // (Gauss-Newton, log space). A scene value whose error exceeds `max_relative_error` is not
+  // identified and keeps the twin's.
+  std::vector<double> controller_relative_error;  // interpolation, latency, kp, kd, friction
+  std::vector<double> scene_fitted, scene_relative_error;
+  std::vector<bool> scene_identified;
+  int replays = 0;
+};
+
+// Fits the controller to `free_moves`, then `scene` (starting from the twin's values) to
+// `task_runs` with that controller. Either list may be empty (that stage is skipped).
+// `identified.scene` holds the fitted values where they are identified, the twin's elsewhere.
+RobotSysidResult IdentifyRobotPhysics(const sim::TaskSpec& twin,
+                                      const std::vector<PhysicalParameter>& scene,
+                                      const std::vector<RobotTrajectory>& free_moves,
+                                      const std::vector<RobotTrajectory>& task_runs,
+                                      const RobotSysidOptions& options = {},
+                                      core::Progress* progress = nullptr);
+
+core::Json ToJson(const RobotSysidResult& result);
+
+}  // namespace twinforge::real2sim

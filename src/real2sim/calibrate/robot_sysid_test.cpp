@@ -1,0 +1,81 @@
+#include "real2sim/calibrate/robot_sysid.h"
+
+#include <gtest/gtest.h>
+
+namespace twinforge::real2sim {
+namespace {
+
+using Kind = PhysicalParameter::Kind;
+
+// "The robot" is the drawer task's own scene with a lagging, softer arm and a stiffer drawer;
+// the twin is the same scene with the model's values.
+struct Synthetic {
+  sim::TaskSpec twin = sim::LoadTaskSpec("open_drawer");
+  std::vector<PhysicalParameter> scene{{Kind::kJointDamping, "drawer_slide", 0.05, 500},
+                                       {Kind::kJointFriction, "drawer_slide", 0.05, 200}};
+  RobotPhysics truth;
+  Synthetic() {
+    truth.servo = {0.3, 0.025};
+    truth.arm = {0.75, 1.4, 1, 2.0};
+    truth.scene = {16, 5};
+  }
+  RobotTrajectory Record(const std::string& name, std::vector<sim::JointTargets> targets) {
+    RobotTrajectory t;
+    t.name = name;
+    t.targets = std::move(targets);
+    t.q = TwinReplay(twin).Run(truth, scene, t.targets);
+    return t;
+  }
+};
+
+TEST(RobotSysid, FreeMovesStepEachJointOutAndBack) {
+  Synthetic s;
+  const auto targets = FreeArmTargets(s.twin, 0.15, 6);
+  ASSERT_EQ(targets.size(), 7u * 12u);
+  const sim::ArmVector rest = targets[6].arm;
+  for (int k = 0; k < sim::kArmDof; ++k) {
+    const sim::ArmVector out = targets[12 * k].arm - rest;
+    EXPECT_NEAR(std::abs(out[k]), 0.15, 1e-12);
+    EXPECT_NEAR(out.norm(), 0.15, 1e-12);  // that joint only
+    EXPECT_TRUE(targets[12 * k + 11].arm.isApprox(rest));
+  }
+}
+
+TEST(RobotSysid, RecoversAKnownControllerAndDrawer) {
+  Synthetic s;
+  bool expert_success = false;
+  const std::vector<RobotTrajectory> free{s.Record("free", FreeArmTargets(s.twin))};
+  const std::vector<RobotTrajectory> runs{
+      s.Record("half_speed", ExpertTargets(s.twin, 2, &expert_success))};
+  ASSERT_TRUE(expert_success);
+  RobotSysidOptions options;
+  const RobotSysidResult r = IdentifyRobotPhysics(s.twin, s.scene, free, runs, options);
+
+  EXPECT_NEAR(r.start.scene[0], 10, 1e-9);  // the twin's own drawer_slide damping
+  EXPECT_LT(r.free_error_after, 0.01 * r.free_error_before);
+  EXPECT_LT(r.task_error_after, 0.1 * r.task_error_before);
+  const auto& id = r.identified;
+  EXPECT_NEAR(id.arm.kp, 0.75, 0.75 * 0.1);
+  EXPECT_NEAR(id.servo.interpolation, 0.3, 0.3 * 0.15);
+  EXPECT_NEAR(id.servo.latency, 0.025, 0.0051);  // the servo counts latency in 5 ms steps
+  EXPECT_NEAR(id.scene[0], 16, 16 * 0.15);
+  EXPECT_NEAR(id.scene[1], 5, 5 * 0.15);
+}
+
+TEST(RobotSysid, AGripIsHeldOnlyIfTheFingersStayApart) {
+  RobotTrajectory t;
+  for (double finger : {0.04, 0.0, 0.0, 0.04}) {
+    sim::JointTargets target;
+    target.finger = finger;
+    t.targets.push_back(target);
+  }
+  t.gripper_width = {0.08, 0.02, 0.015, 0.06};
+  EXPECT_TRUE(GripHeld(t));
+  t.gripper_width[2] = 0.001;  // closed on nothing at the end of the pull
+  EXPECT_FALSE(GripHeld(t));
+  for (auto& target : t.targets) target.finger = 0.04;
+  EXPECT_FALSE(GripHeld(t));  // never closed
+}
+
+}  // namespace
+}  // namespace twinforge::real2sim
