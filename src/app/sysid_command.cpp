@@ -11,6 +11,7 @@
 #include "core/progress.h"
 #include "real2sim/calibrate/robot_sysid.h"
 #include "real2sim/export.h"
+#include "real2sim/recipe.h"
 #include "real2sim/twin_edit.h"
 #include "real2sim/twin_spec.h"
 
@@ -133,11 +134,20 @@ void RunSysid(SysidCli& o) {
       real2sim::IdentifyRobotPhysics(twin_task, scene, free_moves, task_runs, o.options, &progress);
   progress.Finish();
 
-  // The refined twin: a copy with the scene's values in twin.yaml and scene.xml re-exported.
+  // The refined twin: a copy with the arm's controller in task.yaml, the scene's values in
+  // twin.yaml and scene.xml re-exported.
+  if (std::filesystem::exists(out) && std::filesystem::equivalent(out, twin))
+    throw core::ConfigError(out.string(), "out", "a directory other than the twin's own");
   std::filesystem::create_directories(out);
   std::filesystem::copy(
       twin, out,
       std::filesystem::copy_options::recursive | std::filesystem::copy_options::overwrite_existing);
+  sim::TaskSpec refined_task = twin_task;
+  if (!free_moves.empty()) {
+    refined_task.control.servo = result.identified.servo;
+    refined_task.control.arm_scales = result.identified.arm;
+  }
+  real2sim::WriteTwinTask(refined_task, out);
   ApplyScene(spec, scene, result.identified.scene);
   real2sim::SaveTwinSpec(out / "twin.yaml", spec);
   real2sim::ExportOptions export_options;

@@ -5,6 +5,7 @@
 #include <cstring>
 
 #include "core/error.h"
+#include "sim/servo_lag.h"
 
 namespace twinforge::sim {
 
@@ -47,6 +48,8 @@ Env::Env(std::shared_ptr<const Task> task, int env_id)
   const auto& r = task_->index().robot;
   for (int k = 0; k < kArmDof; ++k) robot_dofs_.push_back(r.arm_dof[k]);
   for (int k = 0; k < 2; ++k) robot_dofs_.push_back(r.finger_dof[k]);
+  if (!spec.control.servo.ideal())
+    servo_ = std::make_shared<ServoLag>(spec.control.servo, r, spec.control.timestep);
   Reset(0, 0);
 }
 
@@ -102,6 +105,7 @@ void Env::Reset(uint64_t seed, int level) {
     data_->ctrl[r.finger_actuator[k]] = task_->robot().gripper_open;
   }
   mj_forward(model_.get(), data_.get());
+  if (servo_) servo_->Reset(data_.get());
   last_bad_qacc_ = data_->warning[mjWARN_BADQACC].number;
 }
 
@@ -258,6 +262,10 @@ StepResult Env::StepTargets(const JointTargets& targets, SubstepHook* hook) {
   gripper_.closure = targets.closure;
   for (int k = 0; k < kArmDof; ++k) data_->ctrl[r.arm_actuator[k]] = targets.arm[k];
   for (int k = 0; k < 2; ++k) data_->ctrl[r.finger_actuator[k]] = targets.finger;
+  if (!hook && servo_) {
+    servo_->Command(targets);
+    hook = servo_.get();
+  }
   for (int s = 0; s < spec.control.substeps; ++s) {
     ApplyForces(substep_count_++);
     if (hook) hook->BeforeSubstep(model_.get(), data_.get());

@@ -33,6 +33,8 @@ inline int StateDim(const Task& task) {
          int(task.index().state_joints.size());
 }
 
+class ServoLag;
+
 class Env {
  public:
   // `env_id` only names the env in messages; randomness comes from the seed given to Reset.
@@ -54,7 +56,8 @@ class Env {
     virtual void BeforeSubstep(const mjModel* m, mjData* d) = 0;
   };
   // Follows joint targets for one control period (Step without the action decoding). With a
-  // hook, the targets are only written to `ctrl` before the hook runs.
+  // hook, the targets are only written to `ctrl` before the hook runs; without one, through the
+  // task's servo (`control.servo`) unless it is ideal.
   StepResult StepTargets(const JointTargets& targets, SubstepHook* hook = nullptr);
 
   // Whether every success predicate holds now.
@@ -107,7 +110,8 @@ class Env {
 
   std::shared_ptr<const Task> task_;
   int env_id_;
-  ModelPtr model_;  // this env's copy: randomization edits it
+  ModelPtr model_;                   // this env's copy: randomization edits it
+  std::shared_ptr<ServoLag> servo_;  // the task's servo, unless ideal
   DataPtr data_;
   Kinematics kinematics_;
   core::Pose base_;

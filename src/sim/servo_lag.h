@@ -1,6 +1,7 @@
-// A robot's low-level joint controller, as the twin models it: how a real arm's servo differs
-// from the twin's ideal position actuators. Commands take effect after a latency; the target
-// the joints servo to moves toward the command by a fraction per physics step instead of
+// A robot's low-level joint controller, as the twin models it (the settings, ServoLagSpec and
+// ArmPhysicsScales, are part of a task's control spec in sim/task.h): how a real arm's servo
+// differs from the twin's ideal position actuators. Commands take effect after a latency; the
+// target the joints servo to moves toward the command by a fraction per physics step instead of
 // jumping; the arm's gains, damping and dry friction are scaled from the robot model's.
 // The proxy reality runs its hidden arm through this with its own values; system
 // identification (real2sim/calibrate/robot_sysid.h) fits them to what a real arm did.
@@ -10,19 +11,6 @@
 #include "sim/env.h"
 
 namespace twinforge::sim {
-
-struct ServoLagSpec {
-  double interpolation = 1.0;  // per physics step, the applied target moves this fraction of the
-                               // way to the commanded one (1 = jumps at once)
-  double latency = 0.0;        // s before a new command starts to be followed
-  template <class A>
-  void Serialize(A& a) {
-    a("interpolation", interpolation);
-    a("latency", latency);
-    a.Require(interpolation > 0 && interpolation <= 1, "interpolation", "a fraction in (0, 1]");
-    a.Require(latency >= 0 && latency < 1, "latency", "a delay in [0, 1) s");
-  }
-};
 
 // Follows joint targets through the latency and the interpolation (Env::StepTargets' hook).
 class ServoLag : public Env::SubstepHook {
@@ -44,11 +32,6 @@ class ServoLag : public Env::SubstepHook {
   int substep_ = 0;
 };
 
-// The arm's actuator stiffness (kp) and damping (kd), and its joints' damping and dry friction,
-// each as a multiple of the robot model's.
-struct ArmPhysicsScales {
-  double kp = 1, kd = 1, damping = 1, frictionloss = 1;
-};
 // Multiplies `m`'s arm values (assumed nominal) by `scales`.
 void ScaleArmPhysics(mjModel* m, const RobotIndex& robot, const ArmPhysicsScales& scales);
 

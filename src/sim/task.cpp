@@ -6,6 +6,7 @@
 #include "core/config.h"
 #include "core/error.h"
 #include "sim/mjcf.h"
+#include "sim/servo_lag.h"
 
 namespace twinforge::sim {
 
@@ -155,6 +156,7 @@ Task::Task(TaskSpec spec, const ModelEdit& edit) : spec_(std::move(spec)) {
     if (!step.carry.empty()) ids.carry = Id(mjOBJ_SITE, step.carry, field + ".carry");
     index_.expert_steps.push_back(ids);
   }
+  ScaleArmPhysics(model_.get(), index_.robot, spec_.control.arm_scales);
   if (edit) edit(model_.get(), index_);
 }
 

@@ -367,11 +367,45 @@ struct WorkspaceSpec {
   }
 };
 
+// The robot's servo as a real arm's differs from ideal position actuators (sim/servo_lag.h):
+// commands take effect after a latency and the target moves toward them by a fraction per
+// physics step. The default is the ideal servo.
+struct ServoLagSpec {
+  double interpolation = 1.0;  // per physics step, the applied target moves this fraction of the
+                               // way to the commanded one (1 = jumps at once)
+  double latency = 0.0;        // s before a new command starts to be followed
+  bool ideal() const { return interpolation == 1.0 && latency == 0.0; }
+  template <class A>
+  void Serialize(A& a) {
+    a("interpolation", interpolation);
+    a("latency", latency);
+    a.Require(interpolation > 0 && interpolation <= 1, "interpolation", "a fraction in (0, 1]");
+    a.Require(latency >= 0 && latency < 1, "latency", "a delay in [0, 1) s");
+  }
+};
+
+// The arm's actuator stiffness (kp) and damping (kd), and its joints' damping and dry friction,
+// each as a multiple of the robot model's.
+struct ArmPhysicsScales {
+  double kp = 1, kd = 1, damping = 1, frictionloss = 1;
+  template <class A>
+  void Serialize(A& a) {
+    a("kp", kp);
+    a("kd", kd);
+    a("damping", damping);
+    a("frictionloss", frictionloss);
+    a.Require(kp > 0 && kd > 0 && damping > 0 && frictionloss > 0, "kp", "positive scales");
+  }
+};
+
 struct ControlSpec {
   ActionMode action = ActionMode::kDiscrete;
   ActionLimits limits;
   int substeps = 20;        // physics steps per control step
   double timestep = 0.005;  // s per physics step (10 Hz control by default)
+  // The robot's low-level controller as identified on the real arm (`twinforge sysid`).
+  ServoLagSpec servo;
+  ArmPhysicsScales arm_scales;
   template <class A>
   void Serialize(A& a) {
     a.Enum("action", action,
@@ -379,6 +413,8 @@ struct ControlSpec {
     a("limits", limits);
     a("substeps", substeps);
     a("timestep", timestep);
+    a("servo", servo);
+    a("arm_scales", arm_scales);
     a.Require(substeps > 0, "substeps", "a positive integer");
     a.Require(timestep > 0 && timestep <= 0.02, "timestep", "a step in (0, 0.02] s");
   }

@@ -97,8 +97,17 @@ bool GripHeld(const RobotTrajectory& t) {
   return false;
 }
 
+namespace {
+// The twin with the model's own arm: the physics under test are applied on top of it.
+sim::TaskSpec IdealController(sim::TaskSpec twin) {
+  twin.control.servo = {};
+  twin.control.arm_scales = {};
+  return twin;
+}
+}  // namespace
+
 TwinReplay::TwinReplay(const sim::TaskSpec& twin)
-    : task_(std::make_shared<const sim::Task>(twin)), env_(task_) {}
+    : task_(std::make_shared<const sim::Task>(IdealController(twin))), env_(task_) {}
 
 std::vector<sim::ArmVector> TwinReplay::Run(const RobotPhysics& physics,
                                             const std::vector<PhysicalParameter>& scene,
