@@ -93,7 +93,10 @@ void RunSysid(SysidCli& o) {
   if (!o.task.empty() && twin_task.name != o.task)
     throw core::ConfigError((twin / "task.yaml").string(), "name",
                             "the twin is of task '" + twin_task.name + "', not '" + o.task + "'");
-  real2sim::TwinSpec spec = real2sim::LoadTwinSpec(twin / "twin.yaml");
+  // A task's own scene (no twin.yaml) has only the arm's controller to identify.
+  const bool has_spec = std::filesystem::exists(twin / "twin.yaml");
+  real2sim::TwinSpec spec;
+  if (has_spec) spec = real2sim::LoadTwinSpec(twin / "twin.yaml");
   const auto scene = SceneParameters(spec);
 
   // The experiments, planned in the twin.
@@ -148,11 +151,13 @@ void RunSysid(SysidCli& o) {
     refined_task.control.arm_scales = result.identified.arm;
   }
   real2sim::WriteTwinTask(refined_task, out);
-  ApplyScene(spec, scene, result.identified.scene);
-  real2sim::SaveTwinSpec(out / "twin.yaml", spec);
-  real2sim::ExportOptions export_options;
-  export_options.cameras = real2sim::ReadSceneCameras(out / "scene.xml");
-  real2sim::ExportMjcf(spec, out, export_options);
+  if (has_spec) {
+    ApplyScene(spec, scene, result.identified.scene);
+    real2sim::SaveTwinSpec(out / "twin.yaml", spec);
+    real2sim::ExportOptions export_options;
+    export_options.cameras = real2sim::ReadSceneCameras(out / "scene.xml");
+    real2sim::ExportMjcf(spec, out, export_options);
+  }
 
   core::Json report = real2sim::ToJson(result);
   core::Json recorded = core::Json::array();
