@@ -182,14 +182,14 @@ RobotSysidResult IdentifyRobotPhysics(const sim::TaskSpec& twin,
   // arm's scales within a factor 4 of the model's.
   if (!free_moves.empty()) {
     const std::vector<double> lower{0.01, 0.001, 0.25, 0.25, 0.25}, upper{1.0, 0.1, 4, 4, 4};
-    LeastSquaresResult fit = LeastSquaresLogSpace(
-        [&](const std::vector<double>& v) {
-          RobotPhysics p = physics;
-          SetController(p, v);
-          tick("controller");
-          return replay.Residuals(p, scene, free_moves);
-        },
-        ControllerVector(physics), lower, upper, options.controller);
+    auto residuals = [&](const std::vector<double>& v) {
+      RobotPhysics p = physics;
+      SetController(p, v);
+      tick("controller");
+      return replay.Residuals(p, scene, free_moves);
+    };
+    LeastSquaresResult fit = LeastSquaresLogSpace(residuals, ControllerVector(physics), lower,
+                                                  upper, options.controller);
     r.replays += fit.replays;
     // The fit bends where the latency crosses a whole physics step, and can stall there: refit
     // the others with the latency held at the nearest whole steps and keep the best.
@@ -199,14 +199,7 @@ RobotSysidResult IdentifyRobotPhysics(const sim::TaskSpec& twin,
       const double latency = std::max(steps * dt, lower[1]);
       std::vector<double> start = fit.values, lo = lower, hi = upper;
       start[1] = lo[1] = hi[1] = latency;
-      LeastSquaresResult held = LeastSquaresLogSpace(
-          [&](const std::vector<double>& v) {
-            RobotPhysics p = physics;
-            SetController(p, v);
-            tick("controller");
-            return replay.Residuals(p, scene, free_moves);
-          },
-          start, lo, hi, options.controller);
+      LeastSquaresResult held = LeastSquaresLogSpace(residuals, start, lo, hi, options.controller);
       r.replays += held.replays;
       if (!held.error.empty() && held.error.back() < fit.error.back()) {
         held.relative_error[1] = 0.5 * dt / latency;  // to within half a step
