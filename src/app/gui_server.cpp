@@ -3,6 +3,9 @@
 #include <pthread.h>
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
+#include <atomic>
+#include <chrono>
 #include <csignal>
 #include <cstdlib>
 #include <fstream>
@@ -28,8 +31,14 @@ constexpr const char* kJson = "application/json; charset=utf-8";
 
 void Reply(httplib::Response& res, int status, const core::Json& body) {
   res.status = status;
-  res.set_content(body.dump(), kJson);
+  // An error message may quote bytes that are not UTF-8 (a query string, a cut-off name).
+  res.set_content(body.dump(-1, ' ', false, core::Json::error_handler_t::replace), kJson);
 }
+
+// A request for something that does not exist (404), as against a refused edit (400).
+struct NotFound : core::Error {
+  using core::Error::Error;
+};
 
 // The built page's files (index.html, app.js, style.css...), read once.
 void ServePage(httplib::Server& server, const std::filesystem::path& web) {
@@ -62,17 +71,25 @@ void Handle(std::mutex& lock, httplib::Response& res, Work&& work) {
   try {
     std::lock_guard<std::mutex> guard(lock);
     Reply(res, 200, work());
+  } catch (const NotFound& e) {
+    Reply(res, 404, {{"error", e.what()}});
   } catch (const core::ConfigError& e) {
     Reply(res, 400, {{"error", e.what()}});
-  } catch (const core::IoError& e) {
-    Reply(res, 404, {{"error", e.what()}});
   } catch (const std::exception& e) {
     spdlog::error("gui: {}", e.what());
     Reply(res, 500, {{"error", e.what()}});
   }
 }
 
+// Edits come as JSON: a browser cannot send that cross-site without asking first (a CORS
+// preflight this server never grants), so another web page cannot edit the twin.
+void RequireJson(const httplib::Request& req) {
+  if (req.get_header_value("Content-Type").rfind("application/json", 0) != 0)
+    throw core::ConfigError("request to " + req.path, "Content-Type", "application/json");
+}
+
 core::Json ParseBody(const httplib::Request& req) {
+  RequireJson(req);
   core::Json body = core::Json::parse(req.body, nullptr, false);
   if (body.is_discarded() || !body.is_object())
     throw core::ConfigError("request to " + req.path, "", "the body is not a JSON object");
@@ -105,10 +122,20 @@ void ServeTwinEditor(const GuiOptions& options) {
     Handle(lock, res, [&] { return session.State(); });
   });
   server.Get("/api/scan", [&](const httplib::Request&, httplib::Response& res) {
-    Handle(lock, res, [&] { return session.ScanJson(); });
+    Handle(lock, res, [&] {
+      if (!std::filesystem::exists(session.dir() / "scan.ply"))
+        throw NotFound("the twin has no scan.ply");
+      return session.ScanJson();
+    });
   });
   server.Get("/api/part", [&](const httplib::Request& req, httplib::Response& res) {
-    Handle(lock, res, [&] { return session.PartMeshJson(req.get_param_value("name")); });
+    Handle(lock, res, [&] {
+      const std::string name = req.get_param_value("name");
+      const auto& parts = session.spec().parts;
+      if (std::none_of(parts.begin(), parts.end(), [&](const auto& p) { return p.name == name; }))
+        throw NotFound("the twin has no part named '" + name + "'");
+      return session.PartMeshJson(name);
+    });
   });
   server.Post("/api/spec", [&](const httplib::Request& req, httplib::Response& res) {
     Handle(lock, res, [&] {
@@ -122,21 +149,24 @@ void ServeTwinEditor(const GuiOptions& options) {
       return session.State();
     });
   });
-  server.Post("/api/undo", [&](const httplib::Request&, httplib::Response& res) {
+  server.Post("/api/undo", [&](const httplib::Request& req, httplib::Response& res) {
     Handle(lock, res, [&] {
+      RequireJson(req);
       session.Undo();
       return session.State();
     });
   });
-  server.Post("/api/save", [&](const httplib::Request&, httplib::Response& res) {
+  server.Post("/api/save", [&](const httplib::Request& req, httplib::Response& res) {
     Handle(lock, res, [&] {
+      RequireJson(req);
       const auto path = session.Save();
       spdlog::info("gui: saved {}", path.string());
       return core::Json{{"saved", path.string()}, {"backup", path.string() + ".bak"}};
     });
   });
-  server.Post("/api/export", [&](const httplib::Request&, httplib::Response& res) {
+  server.Post("/api/export", [&](const httplib::Request& req, httplib::Response& res) {
     Handle(lock, res, [&] {
+      RequireJson(req);
       core::Json exported = session.Export();
       spdlog::info("gui: exported {}", exported["scene"].get<std::string>());
       exported["state"] = session.State();
@@ -159,14 +189,19 @@ void ServeTwinEditor(const GuiOptions& options) {
   if (port <= 0)
     throw core::IoError("cannot listen on " + host + ":" + std::to_string(options.port) +
                         " (in use? --port 0 picks a free one)");
+  std::atomic<bool> listening_done = false;
   std::thread stopper([&] {
     int signal = 0;
     sigwait(&stop_signals, &signal);
+    // A signal right after the bind: wait until the server runs, or stop() would do nothing.
+    while (!server.is_running() && !listening_done)
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
     server.stop();
   });
   std::cout << "gui: serving http://" << host << ":" << port << "/ (twin " << session.dir().string()
             << "; Ctrl+C stops)" << std::endl;
   const bool listened = server.listen_after_bind();
+  listening_done = true;
   if (!listened) pthread_kill(stopper.native_handle(), SIGTERM);
   stopper.join();
   if (session.dirty()) spdlog::warn("gui: stopped with unsaved edits (twin.yaml is as last saved)");

@@ -18,7 +18,8 @@ namespace {
 constexpr const char* kEditOrigin = "twin.yaml (edit)";
 
 // Numbers for the browser: 0.1 mm is finer than any scan, and short numbers keep the JSON small.
-double Rounded(double v, double step) { return std::round(v / step) * step; }
+// Dividing by the inverse step gives the double nearest the decimal, which prints short.
+double Rounded(double v, double step) { return std::round(v / step) / std::round(1 / step); }
 
 void AppendVector(core::Json& array, const Eigen::Vector3d& v, double step) {
   for (int k = 0; k < 3; ++k) array.push_back(Rounded(v[k], step));
@@ -109,7 +110,9 @@ void TwinEditSession::Undo() {
 
 std::filesystem::path TwinEditSession::Save() {
   const auto path = dir_ / "twin.yaml";
-  SaveTwinSpec(path, spec_);
+  if (!dirty()) return path;
+  SaveTwinSpec(path, spec_, !backed_up_);
+  backed_up_ = true;
   saved_ = core::ToJson(spec_);
   return path;
 }
@@ -178,10 +181,15 @@ const Mesh& TwinEditSession::SourceMesh(const std::string& relative) {
   return it->second;
 }
 
-Mesh TwinEditSession::CutPart(const PartSpec& part) {
-  Mesh mesh = SourceMesh(part.mesh);
-  for (const auto& cut : part.cuts) mesh = CutMesh(mesh, cut);
-  return mesh;
+const Mesh& TwinEditSession::CutPart(const PartSpec& part) {
+  const std::string key = part.mesh + core::ToJson(part.cuts).dump();
+  auto it = cut_.find(key);
+  if (it == cut_.end()) {
+    Mesh mesh = SourceMesh(part.mesh);
+    for (const auto& cut : part.cuts) mesh = CutMesh(mesh, cut);
+    it = cut_.emplace(key, std::move(mesh)).first;
+  }
+  return it->second;
 }
 
 core::Json TwinEditSession::PartMeshJson(const std::string& part) {
@@ -189,7 +197,7 @@ core::Json TwinEditSession::PartMeshJson(const std::string& part) {
   for (const auto& p : spec_.parts)
     if (p.name == part) spec = &p;
   if (!spec) throw core::ConfigError(kEditOrigin, "parts", "no part named '" + part + "'");
-  const Mesh mesh = CutPart(*spec);
+  const Mesh& mesh = CutPart(*spec);
   // Only the vertices the remaining triangles use, renumbered.
   std::vector<int> renumber(mesh.vertices.size(), -1);
   core::Json positions = core::Json::array(), colors = core::Json::array(),

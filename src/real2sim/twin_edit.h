@@ -38,7 +38,8 @@ class TwinEditSession {
   // Back to the spec before the last accepted edit. Throws ConfigError if there is none.
   void Undo();
 
-  // Writes twin.yaml (atomically; the previous file becomes twin.yaml.bak). Returns its path.
+  // Writes twin.yaml atomically if the spec changed. The first save of a session keeps the file
+  // it opened as twin.yaml.bak; later saves leave that backup alone. Returns the path.
   std::filesystem::path Save();
 
   // Saves if dirty, then writes scene.xml with the cameras the previous export had, compiles it
@@ -56,13 +57,15 @@ class TwinEditSession {
 
  private:
   const Mesh& SourceMesh(const std::string& relative);
-  Mesh CutPart(const PartSpec& part);  // its mesh with its cuts applied
+  const Mesh& CutPart(const PartSpec& part);  // its mesh with its cuts applied (cached)
 
   std::filesystem::path dir_;
   TwinSpec spec_;
   core::Json saved_;  // the spec on disk, as JSON
   std::vector<TwinSpec> undo_;
+  bool backed_up_ = false;              // twin.yaml.bak holds the file the session opened
   std::map<std::string, Mesh> meshes_;  // mesh files read so far, by path in the twin
+  std::map<std::string, Mesh> cut_;     // cut meshes, by mesh path and cuts
 };
 
 // The cameras of an exported scene.xml (name, pose in OpenCV axes, fovy), so a re-export keeps

@@ -113,6 +113,13 @@ TEST(TwinEdit, AnInvalidEditIsRefusedWithTheFieldAndChangesNothing) {
   orphan["joints"][0]["parent"] = "shelf";
   EXPECT_NE(ProposalError(session, orphan).find("joints[0].parent"), std::string::npos);
 
+  core::Json quote = core::ToJson(session.spec());
+  quote["parts"][1]["name"] = "a\"b";
+  EXPECT_NE(ProposalError(session, quote).find("parts[1].name"), std::string::npos);
+  core::Json outside = core::ToJson(session.spec());
+  outside["parts"][1]["mesh"] = "../block/meshes/block.ply";
+  EXPECT_NE(ProposalError(session, outside).find("inside the twin"), std::string::npos);
+
   core::Json loop = core::ToJson(session.spec());
   loop["joints"].push_back({{"name", "back"}, {"parent", "piece"}, {"child", "block"}});
   EXPECT_NE(ProposalError(session, loop).find("loop"), std::string::npos);
@@ -155,7 +162,15 @@ TEST(TwinEdit, SavingKeepsThePreviousSpecAsABackup) {
   EXPECT_EQ(session.Save(), dir / "twin.yaml");
   EXPECT_FALSE(session.dirty());
   EXPECT_EQ(ReadText(dir / "twin.yaml.bak"), original);
+  // A second save in the session, and one with nothing changed, keep the file it started from.
+  core::Json heavier = core::ToJson(session.spec());
+  heavier["parts"][1]["mass"] = 2.0;
+  session.Propose(heavier);
+  session.Save();
+  session.Save();
+  EXPECT_EQ(ReadText(dir / "twin.yaml.bak"), original);
   const TwinSpec saved = LoadTwinSpec(dir / "twin.yaml");
+  EXPECT_DOUBLE_EQ(saved.parts[1].mass, 2.0);
   ASSERT_EQ(saved.parts.size(), 2u);
   EXPECT_EQ(saved.parts[1].cuts.back().op, CutOp::kIntersect);
   EXPECT_EQ(saved.joints[0].type, JointType::kPrismatic);

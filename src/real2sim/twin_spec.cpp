@@ -1,5 +1,7 @@
 #include "real2sim/twin_spec.h"
 
+#include <algorithm>
+#include <cctype>
 #include <map>
 #include <set>
 
@@ -93,12 +95,24 @@ void ValidateTwinSpec(const TwinSpec& spec, const std::filesystem::path& twin_di
   auto fail = [&](const std::string& field, const std::string& message) {
     throw core::ConfigError(origin, field, message);
   };
+  // Names become MJCF names and file names (meshes/visual/<part>.obj).
+  auto check_name = [&](const std::string& name, const std::string& field) {
+    const bool plain = !name.empty() && std::all_of(name.begin(), name.end(), [](char c) {
+      return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.';
+    });
+    if (!plain || name == "." || name == "..")
+      fail(field, "a name of letters, digits, '_', '-' and '.', got '" + name + "'");
+  };
   std::set<std::string> parts;
   for (std::size_t i = 0; i < spec.parts.size(); ++i) {
     const auto& p = spec.parts[i];
     const std::string at = "parts[" + std::to_string(i) + "]";
+    check_name(p.name, at + ".name");
     if (p.name == "world") fail(at + ".name", "'world' is reserved for the static scene");
     if (!parts.insert(p.name).second) fail(at + ".name", "a second part named '" + p.name + "'");
+    const std::filesystem::path mesh(p.mesh);
+    if (mesh.is_absolute() || std::find(mesh.begin(), mesh.end(), "..") != mesh.end())
+      fail(at + ".mesh", "a path inside the twin directory, got " + p.mesh);
     if (!std::filesystem::is_regular_file(twin_dir / p.mesh))
       fail(at + ".mesh", "no mesh file " + (twin_dir / p.mesh).string());
   }
@@ -107,6 +121,7 @@ void ValidateTwinSpec(const TwinSpec& spec, const std::filesystem::path& twin_di
   for (std::size_t i = 0; i < spec.joints.size(); ++i) {
     const auto& j = spec.joints[i];
     const std::string at = "joints[" + std::to_string(i) + "]";
+    check_name(j.name, at + ".name");
     if (!joints.insert(j.name).second) fail(at + ".name", "a second joint named '" + j.name + "'");
     if (j.parent != "world" && !parts.count(j.parent))
       fail(at + ".parent", "no part named '" + j.parent + "' (nor 'world')");
@@ -129,6 +144,7 @@ void ValidateTwinSpec(const TwinSpec& spec, const std::filesystem::path& twin_di
   for (std::size_t i = 0; i < spec.sites.size(); ++i) {
     const auto& s = spec.sites[i];
     const std::string at = "sites[" + std::to_string(i) + "]";
+    check_name(s.name, at + ".name");
     if (!sites.insert(s.name).second) fail(at + ".name", "a second site named '" + s.name + "'");
     if (s.part != "world" && !parts.count(s.part))
       fail(at + ".part", "no part named '" + s.part + "' (nor 'world')");
@@ -141,9 +157,9 @@ TwinSpec LoadTwinSpec(const std::filesystem::path& path) {
   return spec;
 }
 
-void SaveTwinSpec(const std::filesystem::path& path, const TwinSpec& spec) {
+void SaveTwinSpec(const std::filesystem::path& path, const TwinSpec& spec, bool backup) {
   ValidateTwinSpec(spec, path.parent_path(), path.string());
-  if (std::filesystem::exists(path))
+  if (backup && std::filesystem::exists(path))
     std::filesystem::copy_file(path, path.string() + ".bak",
                                std::filesystem::copy_options::overwrite_existing);
   core::SaveConfig(path, spec);

@@ -179,12 +179,14 @@ Mesh BoxMesh(const BoxSpec& box);
 
 // Loads and validates twin.yaml. Throws ConfigError naming the file and field.
 TwinSpec LoadTwinSpec(const std::filesystem::path& path);
-// Cross-field checks (names unique, references resolve, one parent per part, axes non-zero,
-// mesh files exist under `twin_dir`). Throws ConfigError naming `origin` and the field path,
+// Cross-field checks (names of letters, digits, '_', '-' and '.', unique; references resolve;
+// one parent per part; axes non-zero; mesh files exist under `twin_dir`, by relative paths that
+// stay inside it). Throws ConfigError naming `origin` and the field path,
 // e.g. "joints[0].child".
 void ValidateTwinSpec(const TwinSpec& spec, const std::filesystem::path& twin_dir,
                       const std::string& origin);
-// Writes twin.yaml atomically, keeping the previous file as twin.yaml.bak.
-void SaveTwinSpec(const std::filesystem::path& path, const TwinSpec& spec);
+// Writes twin.yaml atomically, keeping the previous file as twin.yaml.bak (unless `backup` is
+// false: an editor that already kept the file it started from).
+void SaveTwinSpec(const std::filesystem::path& path, const TwinSpec& spec, bool backup = true);
 
 }  // namespace twinforge::real2sim
