@@ -2,6 +2,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <iostream>
 #include <memory>
 
@@ -89,6 +90,12 @@ void ApplyScene(real2sim::TwinSpec& spec, const std::vector<real2sim::PhysicalPa
 
 void RunSysid(SysidCli& o) {
   const std::filesystem::path twin = o.twin, out = o.out;
+  // Checked first: the experiments and the fit take minutes. (A copy into itself never ends.)
+  const auto twin_abs = std::filesystem::weakly_canonical(twin);
+  const auto out_abs = std::filesystem::weakly_canonical(out);
+  if (std::mismatch(twin_abs.begin(), twin_abs.end(), out_abs.begin(), out_abs.end()).first ==
+      twin_abs.end())
+    throw core::ConfigError(out.string(), "out", "a directory outside the twin " + twin.string());
   const sim::TaskSpec twin_task = sim::LoadTaskSpec((twin / "task.yaml").string());
   if (!o.task.empty() && twin_task.name != o.task)
     throw core::ConfigError((twin / "task.yaml").string(), "name",
@@ -139,8 +146,6 @@ void RunSysid(SysidCli& o) {
 
   // The refined twin: a copy with the arm's controller in task.yaml, the scene's values in
   // twin.yaml and scene.xml re-exported.
-  if (std::filesystem::exists(out) && std::filesystem::equivalent(out, twin))
-    throw core::ConfigError(out.string(), "out", "a directory other than the twin's own");
   std::filesystem::create_directories(out);
   std::filesystem::copy(
       twin, out,

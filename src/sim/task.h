@@ -394,7 +394,10 @@ struct ArmPhysicsScales {
     a("kd", kd);
     a("damping", damping);
     a("frictionloss", frictionloss);
-    a.Require(kp > 0 && kd > 0 && damping > 0 && frictionloss > 0, "kp", "positive scales");
+    a.Require(kp > 0, "kp", "a positive scale");
+    a.Require(kd > 0, "kd", "a positive scale");
+    a.Require(damping > 0, "damping", "a positive scale");
+    a.Require(frictionloss > 0, "frictionloss", "a positive scale");
   }
 };
 
@@ -417,6 +420,8 @@ struct ControlSpec {
     a("arm_scales", arm_scales);
     a.Require(substeps > 0, "substeps", "a positive integer");
     a.Require(timestep > 0 && timestep <= 0.02, "timestep", "a step in (0, 0.02] s");
+    a.Require(servo.latency < substeps * timestep, "servo",
+              "a latency shorter than one control period (substeps x timestep)");
   }
 };
 

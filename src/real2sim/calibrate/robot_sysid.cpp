@@ -26,7 +26,7 @@ std::vector<double> ControllerVector(const RobotPhysics& p) {
 
 void SetController(RobotPhysics& p, const std::vector<double>& v) {
   p.servo.interpolation = std::min(v[0], 1.0);
-  p.servo.latency = v[1];
+  p.servo.latency = v[1] < 1e-6 ? 0.0 : v[1];
   p.arm.kp = v[2];
   p.arm.kd = v[3];
   p.arm.frictionloss = v[4];
@@ -169,6 +169,8 @@ RobotSysidResult IdentifyRobotPhysics(const sim::TaskSpec& twin,
   RobotSysidResult r;
   r.scene = scene;
   TwinReplay replay(twin);
+  r.start.servo = twin.control.servo;
+  r.start.arm = twin.control.arm_scales;
   r.start.scene = replay.NominalScene(scene);
   RobotPhysics physics = r.start;
   r.free_error_before = replay.Error(physics, scene, free_moves);
@@ -178,10 +180,13 @@ RobotSysidResult IdentifyRobotPhysics(const sim::TaskSpec& twin,
     if (progress && ++done % 10 == 0) progress->Set(done, stage);
   };
 
-  // The controller, from the free moves: interpolation in (0, 1], latency up to 0.1 s, the
-  // arm's scales within a factor 4 of the model's.
+  // The controller, from the free moves: interpolation in (0, 1], latency up to a control period
+  // (at most 0.1 s), the arm's scales within a factor 4 of the model's.
   if (!free_moves.empty()) {
-    const std::vector<double> lower{0.01, 0.001, 0.25, 0.25, 0.25}, upper{1.0, 0.1, 4, 4, 4};
+    const double dt = twin.control.timestep;
+    const double period = twin.control.substeps * dt;
+    const std::vector<double> lower{0.01, 0.001, 0.25, 0.25, 0.25},
+        upper{1.0, std::min(0.1, period - 1e-9), 4, 4, 4};
     auto residuals = [&](const std::vector<double>& v) {
       RobotPhysics p = physics;
       SetController(p, v);
@@ -192,18 +197,27 @@ RobotSysidResult IdentifyRobotPhysics(const sim::TaskSpec& twin,
                                                   upper, options.controller);
     r.replays += fit.replays;
     // The fit bends where the latency crosses a whole physics step, and can stall there: refit
-    // the others with the latency held at the nearest whole steps and keep the best.
-    const double dt = twin.control.timestep;
+    // the other four with the latency held at the nearest whole steps (none included) and keep
+    // the best.
     const int nearest = static_cast<int>(std::lround(fit.values[1] / dt));
     for (int steps = std::max(0, nearest - 1); steps <= nearest + 1; ++steps) {
-      const double latency = std::max(steps * dt, lower[1]);
-      std::vector<double> start = fit.values, lo = lower, hi = upper;
-      start[1] = lo[1] = hi[1] = latency;
-      LeastSquaresResult held = LeastSquaresLogSpace(residuals, start, lo, hi, options.controller);
+      const double latency = steps * dt;
+      if (latency > upper[1]) break;
+      auto with_latency = [&](const std::vector<double>& four) {
+        return std::vector<double>{four[0], latency, four[1], four[2], four[3]};
+      };
+      const std::vector<double> others{fit.values[0], fit.values[2], fit.values[3], fit.values[4]};
+      LeastSquaresResult held = LeastSquaresLogSpace(
+          [&](const std::vector<double>& four) { return residuals(with_latency(four)); }, others,
+          {lower[0], lower[2], lower[3], lower[4]}, {upper[0], upper[2], upper[3], upper[4]},
+          options.controller);
       r.replays += held.replays;
       if (!held.error.empty() && held.error.back() < fit.error.back()) {
-        held.relative_error[1] = 0.5 * dt / latency;  // to within half a step
-        fit = std::move(held);
+        fit.values = with_latency(held.values);
+        fit.error = held.error;
+        fit.relative_error = with_latency(held.relative_error);
+        // To within half a step.
+        fit.relative_error[1] = 0.5 * dt / std::max(latency, dt);
       }
     }
     SetController(physics, fit.values);

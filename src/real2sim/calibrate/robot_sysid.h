@@ -88,8 +88,9 @@ struct RobotSysidOptions {
     a("controller_iterations", controller.iterations);
     a("scene_iterations", scene.iterations);
     a("max_relative_error", max_relative_error);
-    a.Require(controller.iterations > 0 && scene.iterations > 0, "controller_iterations",
-              "positive iteration counts");
+    a.Require(controller.iterations > 0, "controller_iterations", "a positive count");
+    a.Require(scene.iterations > 0, "scene_iterations", "a positive count");
+    a.Require(max_relative_error > 0, "max_relative_error", "a positive fraction");
   }
 };
 
@@ -108,8 +109,10 @@ struct RobotSysidResult {
   int replays = 0;
 };
 
-// Fits the controller to `free_moves`, then `scene` (starting from the twin's values) to
-// `task_runs` with that controller. Either list may be empty (that stage is skipped).
+// Fits the controller to `free_moves` (starting from the twin's `control.servo` and
+// `arm_scales`; the joint-damping scale is kept, it acts as kd does), then `scene` (starting from
+// the twin's values) to `task_runs` with that controller. Either list may be empty (that stage
+// is skipped).
 // `identified.scene` holds the fitted values where they are identified, the twin's elsewhere.
 RobotSysidResult IdentifyRobotPhysics(const sim::TaskSpec& twin,
                                       const std::vector<PhysicalParameter>& scene,

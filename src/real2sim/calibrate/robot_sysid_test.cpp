@@ -55,11 +55,16 @@ TEST(RobotSysid, RecoversAKnownControllerAndDrawer) {
   EXPECT_LT(r.free_error_after, 0.01 * r.free_error_before);
   EXPECT_LT(r.task_error_after, 0.1 * r.task_error_before);
   const auto& id = r.identified;
-  EXPECT_NEAR(id.arm.kp, 0.75, 0.75 * 0.1);
-  EXPECT_NEAR(id.servo.interpolation, 0.3, 0.3 * 0.15);
-  EXPECT_NEAR(id.servo.latency, 0.025, 0.0051);  // the servo counts latency in 5 ms steps
-  EXPECT_NEAR(id.scene[0], 16, 16 * 0.15);
-  EXPECT_NEAR(id.scene[1], 5, 5 * 0.15);
+  // Noise-free and in the model's own form: every value comes back (to 1e-6 here; in practice
+  // to machine precision).
+  EXPECT_NEAR(id.servo.interpolation, 0.3, 1e-6);
+  EXPECT_NEAR(id.servo.latency, 0.025, 1e-9);
+  EXPECT_NEAR(id.arm.kp, 0.75, 1e-6);
+  EXPECT_NEAR(id.arm.kd, 1.4, 1e-6);
+  EXPECT_NEAR(id.arm.frictionloss, 2.0, 1e-6);
+  ASSERT_EQ(r.scene_identified, std::vector<bool>({true, true}));
+  EXPECT_NEAR(id.scene[0], 16, 1e-5);
+  EXPECT_NEAR(id.scene[1], 5, 1e-5);
 }
 
 TEST(RobotSysid, AGripIsHeldOnlyIfTheFingersStayApart) {
