@@ -143,19 +143,30 @@ function renderLists() {
   });
 }
 
-// Fetch every part's cut mesh for the current spec (newest request wins).
+// Fetch the cut mesh of every part whose mesh, cuts or colour changed since it was drawn
+// (newest request wins): setting a mass or adding a site refetches nothing.
 let partGen = 0;
+const drawn = new Map(); // part name -> what its drawn mesh was made from
 async function refreshParts() {
   const gen = ++partGen;
   const parts = state.spec.parts;
-  const results = await Promise.all(parts.map((p) =>
-    api.part(p.name).then((data) => ({ p, data }), (err) => ({ p, err }))));
+  const keyOf = (p, i) => JSON.stringify([p.mesh, p.cuts || [], i]);
+  const results = await Promise.all(parts.map((p, i) => (drawn.get(p.name) === keyOf(p, i)
+    ? Promise.resolve({ p, unchanged: true })
+    : api.part(p.name).then((data) => ({ p, data }), (err) => ({ p, err })))));
   if (gen !== partGen) return;
   const errors = [];
-  results.forEach(({ p, data, err }, i) => {
-    if (err) errors.push(`${p.name}: ${err.message}`);
-    else viewer.setPart(p.name, data, partColor(i));
+  results.forEach(({ p, data, err, unchanged }, i) => {
+    if (unchanged) return;
+    if (err) {
+      drawn.delete(p.name);
+      errors.push(`${p.name}: ${err.message}`);
+    } else {
+      viewer.setPart(p.name, data, partColor(i));
+      drawn.set(p.name, keyOf(p, i));
+    }
   });
+  for (const name of [...drawn.keys()]) if (!parts.some((p) => p.name === name)) drawn.delete(name);
   viewer.keepParts(parts.map((p) => p.name));
   viewer.setSelected(state.selected);
   if (errors.length) showError(`part meshes: ${errors.join('; ')}`);
