@@ -19,6 +19,24 @@ int Find(const mjModel* m, mjtObj type, const PhysicalParameter& p) {
   return id;
 }
 
+// A search's start and bounds as log-parameters, the start clamped to the bounds.
+struct LogSpace {
+  std::vector<double> start, lower, upper;
+};
+LogSpace ToLogSpace(const std::vector<double>& start, const std::vector<double>& lower,
+                    const std::vector<double>& upper) {
+  const size_t n = start.size();
+  if (lower.size() != n || upper.size() != n)
+    throw core::ConfigError("sysid", "lower", "one bound of each kind per parameter");
+  LogSpace s{std::vector<double>(n), std::vector<double>(n), std::vector<double>(n)};
+  for (size_t i = 0; i < n; ++i) {
+    s.lower[i] = std::log(lower[i]);
+    s.upper[i] = std::log(upper[i]);
+    s.start[i] = std::clamp(std::log(std::max(start[i], 1e-12)), s.lower[i], s.upper[i]);
+  }
+  return s;
+}
+
 }  // namespace
 
 const char* ToString(PhysicalParameter::Kind kind) {
@@ -121,16 +139,8 @@ SysidResult MinimizeLogSpace(const std::function<double(const std::vector<double
                              const std::vector<double>& start, const std::vector<double>& lower,
                              const std::vector<double>& upper, const SysidOptions& options) {
   const size_t n = start.size();
-  if (lower.size() != n || upper.size() != n)
-    throw core::ConfigError("sysid", "lower", "one bound of each kind per parameter");
   SysidResult result;
-  // Log-parameters, clamped to the bounds.
-  std::vector<double> x(n), lo(n), hi(n);
-  for (size_t i = 0; i < n; ++i) {
-    lo[i] = std::log(lower[i]);
-    hi[i] = std::log(upper[i]);
-    x[i] = std::clamp(std::log(std::max(start[i], 1e-12)), lo[i], hi[i]);
-  }
+  auto [x, lo, hi] = ToLogSpace(start, lower, upper);
   std::vector<double> values(n);
   auto error = [&](const std::vector<double>& at) {
     for (size_t i = 0; i < n; ++i) values[i] = std::exp(at[i]);
@@ -225,15 +235,13 @@ LeastSquaresResult LeastSquaresLogSpace(
     const std::vector<double>& start, const std::vector<double>& lower,
     const std::vector<double>& upper, const SysidOptions& options) {
   const int n = static_cast<int>(start.size());
-  if (static_cast<int>(lower.size()) != n || static_cast<int>(upper.size()) != n)
-    throw core::ConfigError("sysid", "lower", "one bound of each kind per parameter");
   LeastSquaresResult result;
-  Eigen::VectorXd x(n), lo(n), hi(n);
-  for (int i = 0; i < n; ++i) {
-    lo[i] = std::log(lower[i]);
-    hi[i] = std::log(upper[i]);
-    x[i] = std::clamp(std::log(std::max(start[i], 1e-12)), lo[i], hi[i]);
-  }
+  const auto log_space = ToLogSpace(start, lower, upper);
+  auto as_vector = [&](const std::vector<double>& v) {
+    return Eigen::VectorXd(Eigen::Map<const Eigen::VectorXd>(v.data(), n));
+  };
+  Eigen::VectorXd x = as_vector(log_space.start);
+  const Eigen::VectorXd lo = as_vector(log_space.lower), hi = as_vector(log_space.upper);
   auto evaluate = [&](const Eigen::VectorXd& at) {
     std::vector<double> values(n);
     for (int i = 0; i < n; ++i) values[i] = std::exp(at[i]);
