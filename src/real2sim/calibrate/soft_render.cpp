@@ -59,6 +59,39 @@ void FindPairs(const torch::Tensor& u, const torch::Tensor& v, const torch::Tens
 
 }  // namespace
 
+RasterMesh BoxMesh(const Eigen::Vector3d& center, const Eigen::Vector3d& size,
+                   const Eigen::Vector3d& color) {
+  std::vector<double> v, c;
+  for (int i = 0; i < 8; ++i) {
+    for (int k = 0; k < 3; ++k) {
+      v.push_back(center[k] + ((i >> k) & 1 ? 0.5 : -0.5) * size[k]);
+      c.push_back(color[k]);
+    }
+  }
+  // Corner i has bit k set when it is on the + side of axis k.
+  const int64_t quads[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4},
+                               {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
+  std::vector<int64_t> f;
+  for (const auto& q : quads) f.insert(f.end(), {q[0], q[1], q[2], q[0], q[2], q[3]});
+  return {torch::from_blob(v.data(), {8, 3}, kDouble).clone(),
+          torch::from_blob(f.data(), {12, 3}, kLong).clone(),
+          torch::from_blob(c.data(), {8, 3}, kDouble).clone()};
+}
+
+RasterMesh JoinMeshes(const std::vector<RasterMesh>& meshes) {
+  std::vector<torch::Tensor> v, f, c;
+  int64_t offset = 0;
+  for (const RasterMesh& m : meshes) {
+    v.push_back(m.vertices);
+    f.push_back(m.faces + offset);
+    if (m.colors.defined()) c.push_back(m.colors);
+    offset += m.vertices.size(0);
+  }
+  RasterMesh out{torch::cat(v), torch::cat(f), {}};
+  if (c.size() == meshes.size()) out.colors = torch::cat(c);
+  return out;
+}
+
 torch::Tensor RotationMatrix(const torch::Tensor& w) {
   // theta is kept away from zero so that sin(theta)/theta and its gradient stay finite.
   const auto theta2 = (w * w).sum() + 1e-10;

@@ -17,6 +17,8 @@
 
 #include <torch/torch.h>
 
+#include <vector>
+
 #include "core/pinhole.h"
 #include "core/se3.h"
 
@@ -50,6 +52,12 @@ struct CameraTensor {
 // Renders `mesh` as seen by a camera with `intrinsics` at `camera` (camera -> base).
 SoftImage SoftRasterize(const RasterMesh& mesh, const core::PinholeIntrinsics& intrinsics,
                         const CameraTensor& camera, const SoftRasterOptions& options = {});
+
+// An axis-aligned box of `size` at `center` in one colour (12 triangles, outward), and meshes
+// joined into one.
+RasterMesh BoxMesh(const Eigen::Vector3d& center, const Eigen::Vector3d& size,
+                   const Eigen::Vector3d& color);
+RasterMesh JoinMeshes(const std::vector<RasterMesh>& meshes);
 
 // Rotation matrix [3, 3] of a rotation vector [3] (Rodrigues), differentiable at zero.
 torch::Tensor RotationMatrix(const torch::Tensor& rotation_vector);

@@ -13,34 +13,10 @@ const auto kDouble = torch::TensorOptions().dtype(torch::kFloat64);
 
 // Two boxes on a table top, base frame (z up), with a colour per vertex.
 RasterMesh BoxesOnATable() {
-  std::vector<double> v;
-  std::vector<int64_t> f;
-  auto box = [&](double cx, double cy, double cz, double sx, double sy, double sz) {
-    const int64_t first = static_cast<int64_t>(v.size() / 3);
-    for (int i = 0; i < 8; ++i) {
-      v.push_back(cx + ((i & 1) ? 0.5 : -0.5) * sx);
-      v.push_back(cy + ((i & 2) ? 0.5 : -0.5) * sy);
-      v.push_back(cz + ((i & 4) ? 0.5 : -0.5) * sz);
-    }
-    const int quads[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4},
-                             {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
-    for (const auto& q : quads) {
-      for (int t : {0, 2}) {
-        f.push_back(first + q[0]);
-        f.push_back(first + q[t == 0 ? 1 : 2]);
-        f.push_back(first + q[t == 0 ? 2 : 3]);
-      }
-    }
-  };
-  box(0.5, 0.0, -0.02, 0.9, 0.7, 0.04);     // the table
-  box(0.45, -0.12, 0.06, 0.12, 0.1, 0.12);  // a block
-  box(0.6, 0.15, 0.04, 0.08, 0.16, 0.08);   // a bar
-  RasterMesh mesh;
-  mesh.vertices =
-      torch::from_blob(v.data(), {static_cast<int64_t>(v.size() / 3), 3}, kDouble).clone();
-  mesh.faces = torch::from_blob(f.data(), {static_cast<int64_t>(f.size() / 3), 3},
-                                torch::TensorOptions().dtype(torch::kInt64))
-                   .clone();
+  const Eigen::Vector3d grey(0.5, 0.5, 0.5);
+  RasterMesh mesh = JoinMeshes({BoxMesh({0.5, 0.0, -0.02}, {0.9, 0.7, 0.04}, grey),     // the table
+                                BoxMesh({0.45, -0.12, 0.06}, {0.12, 0.1, 0.12}, grey),  // a block
+                                BoxMesh({0.6, 0.15, 0.04}, {0.08, 0.16, 0.08}, grey)});  // a bar
   mesh.colors = 0.2 + 0.6 * torch::rand({mesh.vertices.size(0), 3}, kDouble);
   return mesh;
 }

@@ -1,0 +1,110 @@
+#include "samrl/active_camera.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "core/error.h"
+
+namespace twinforge::samrl {
+
+namespace {
+
+const auto kDouble = torch::TensorOptions().dtype(torch::kFloat64);
+
+double Score(const real2sim::RasterMesh& scene, const core::PinholeIntrinsics& intrinsics,
+             const OrbitMount& mount, const ViewScore& score, double azimuth, double elevation,
+             const real2sim::SoftRasterOptions& raster) {
+  torch::NoGradGuard no_grad;
+  const auto angles = torch::tensor({azimuth, elevation}, kDouble);
+  return score(real2sim::SoftRasterize(scene, intrinsics, OrbitPose(mount, angles), raster))
+      .item<double>();
+}
+
+void CheckMount(const OrbitMount& mount) {
+  if (!(mount.radius > 0) || !(mount.min_azimuth <= mount.max_azimuth) ||
+      !(mount.min_elevation <= mount.max_elevation) || mount.min_elevation <= -M_PI / 2 ||
+      mount.max_elevation >= M_PI / 2)
+    throw core::Error(
+        "orbit mount: needs a positive radius, ordered limits and elevations strictly between "
+        "-90 and 90 degrees");
+}
+
+}  // namespace
+
+real2sim::CameraTensor OrbitPose(const OrbitMount& mount, const torch::Tensor& angles) {
+  const torch::Tensor az = angles[0], el = angles[1];
+  const torch::Tensor center =
+      torch::tensor({mount.center.x(), mount.center.y(), mount.center.z()}, kDouble);
+  const torch::Tensor eye =
+      center + mount.radius * torch::stack({torch::cos(el) * torch::cos(az),
+                                            torch::cos(el) * torch::sin(az), torch::sin(el)});
+  // Forward toward the centre; right = forward x up; down = forward x right (OpenCV axes).
+  const torch::Tensor forward = (center - eye) / mount.radius;
+  const torch::Tensor up = torch::tensor({0.0, 0.0, 1.0}, kDouble);
+  torch::Tensor right = torch::cross(forward, up, 0);
+  right = right / right.norm();
+  const torch::Tensor down = torch::cross(forward, right, 0);
+  return {torch::stack({right, down, forward}, 1), eye};
+}
+
+core::Pose OrbitPose(const OrbitMount& mount, double azimuth, double elevation) {
+  return real2sim::ToPose(OrbitPose(mount, torch::tensor({azimuth, elevation}, kDouble)));
+}
+
+ViewChoice AscendView(const real2sim::RasterMesh& scene, const core::PinholeIntrinsics& intrinsics,
+                      const OrbitMount& mount, const ViewScore& score, double azimuth,
+                      double elevation, const ViewSearchOptions& options) {
+  CheckMount(mount);
+  torch::Tensor angles =
+      torch::tensor({std::clamp(azimuth, mount.min_azimuth, mount.max_azimuth),
+                     std::clamp(elevation, mount.min_elevation, mount.max_elevation)},
+                    kDouble.requires_grad(true));
+  torch::optim::Adam adam({angles}, torch::optim::AdamOptions(options.learning_rate));
+  ViewChoice best;
+  best.score = -INFINITY;
+  for (int step = 0; step <= options.steps; ++step) {
+    const torch::Tensor s =
+        score(real2sim::SoftRasterize(scene, intrinsics, OrbitPose(mount, angles), options.raster));
+    const double value = s.item<double>();
+    if (!std::isfinite(value))
+      throw core::NumericError("active camera: the view score is " + std::to_string(value) +
+                               " at azimuth " + std::to_string(angles[0].item<double>()) +
+                               ", elevation " + std::to_string(angles[1].item<double>()));
+    best.scores.push_back(value);
+    if (value > best.score) {
+      best.score = value;
+      best.azimuth = angles[0].item<double>();
+      best.elevation = angles[1].item<double>();
+    }
+    if (step == options.steps) break;
+    adam.zero_grad();
+    (-s).backward();
+    adam.step();
+    torch::NoGradGuard no_grad;
+    angles[0].clamp_(mount.min_azimuth, mount.max_azimuth);
+    angles[1].clamp_(mount.min_elevation, mount.max_elevation);
+  }
+  return best;
+}
+
+ViewChoice SampleView(const real2sim::RasterMesh& scene, const core::PinholeIntrinsics& intrinsics,
+                      const OrbitMount& mount, const ViewScore& score, core::Rng& rng,
+                      const ViewSearchOptions& options) {
+  CheckMount(mount);
+  ViewChoice best;
+  best.score = -INFINITY;
+  for (int i = 0; i < options.samples; ++i) {
+    const double az = rng.Uniform(mount.min_azimuth, mount.max_azimuth);
+    const double el = rng.Uniform(mount.min_elevation, mount.max_elevation);
+    const double value = Score(scene, intrinsics, mount, score, az, el, options.raster);
+    best.scores.push_back(value);
+    if (value > best.score) {
+      best.score = value;
+      best.azimuth = az;
+      best.elevation = el;
+    }
+  }
+  return best;
+}
+
+}  // namespace twinforge::samrl

@@ -1,0 +1,64 @@
+// SAM-RL's active camera: a camera on a pan/tilt orbit around the workspace whose pose is chosen,
+// before the actor acts, to maximize a score of the view it would see (the sensing-aware
+// Q-function of that view and the actor's action). The view is rendered by the differentiable
+// soft rasterizer, so the pose is found by gradient ascent on the score through the renderer;
+// sampling poses and keeping the best is the option that needs no gradients.
+//
+// Includes <torch/torch.h>: include it only from .cpp files and tests.
+#pragma once
+
+#include <torch/torch.h>
+
+#include <Eigen/Dense>
+#include <functional>
+#include <vector>
+
+#include "core/pinhole.h"
+#include "core/rng.h"
+#include "core/se3.h"
+#include "real2sim/calibrate/soft_render.h"
+
+namespace twinforge::samrl {
+
+// A camera at `radius` from `center`, at an azimuth (about +z, from +x) and an elevation (above
+// the xy plane) within limits, looking at the centre with the image's up toward +z.
+struct OrbitMount {
+  Eigen::Vector3d center = Eigen::Vector3d(0.5, 0.0, 0.1);
+  double radius = 0.8;
+  double min_azimuth = -M_PI, max_azimuth = M_PI;
+  double min_elevation = 0.2, max_elevation = 1.4;
+};
+
+// Camera (OpenCV axes) -> base pose for `angles` = [azimuth, elevation] (a [2] double tensor):
+// differentiable in the angles.
+real2sim::CameraTensor OrbitPose(const OrbitMount& mount, const torch::Tensor& angles);
+core::Pose OrbitPose(const OrbitMount& mount, double azimuth, double elevation);
+
+// A score of a rendered view, a differentiable scalar (e.g. Q(view, action)).
+using ViewScore = std::function<torch::Tensor(const real2sim::SoftImage&)>;
+
+struct ViewSearchOptions {
+  int steps = 60;               // gradient ascent: Adam steps
+  double learning_rate = 0.05;  // rad
+  int samples = 64;             // sampling: poses drawn uniformly within the limits
+  real2sim::SoftRasterOptions raster;
+};
+
+struct ViewChoice {
+  double azimuth = 0, elevation = 0;
+  double score = 0;
+  std::vector<double> scores;  // per ascent step or per sample
+};
+
+// Gradient ascent on `score` from (azimuth, elevation), the angles kept within the mount's
+// limits. Returns the best pose visited.
+ViewChoice AscendView(const real2sim::RasterMesh& scene, const core::PinholeIntrinsics& intrinsics,
+                      const OrbitMount& mount, const ViewScore& score, double azimuth,
+                      double elevation, const ViewSearchOptions& options = {});
+
+// The best of options.samples poses drawn uniformly within the mount's limits.
+ViewChoice SampleView(const real2sim::RasterMesh& scene, const core::PinholeIntrinsics& intrinsics,
+                      const OrbitMount& mount, const ViewScore& score, core::Rng& rng,
+                      const ViewSearchOptions& options = {});
+
+}  // namespace twinforge::samrl
