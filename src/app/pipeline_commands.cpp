@@ -12,6 +12,7 @@
 #include "core/log.h"
 #include "pipeline/main_job.h"
 #include "pipeline/reality_eval.h"
+#include "pipeline/residual_training.h"
 #include "sim/task.h"
 
 namespace twinforge::app {
@@ -55,6 +56,9 @@ void AddEval(CLI::App& parent, int& exit_code) {
   c->add_option("--trials", cli->options.trials, "trials per level")->check(CLI::PositiveNumber);
   c->add_option("--seed", cli->options.seed, "trial seeds (the same for every policy compared)");
   c->add_flag("--sample", cli->options.sample, "sample the policy's moves (default: most likely)");
+  c->add_option("--residual", cli->options.residual,
+                "residual on the policy's actions (train residual)")
+      ->check(CLI::ExistingFile);
   c->add_option("--out", cli->out,
                 "trial log (JSON lines; an existing log of the same policy is resumed)")
       ->required();
@@ -69,6 +73,7 @@ void AddEval(CLI::App& parent, int& exit_code) {
     progress.Finish();
     nlohmann::json report = pipeline::ToJson(r);
     report["policy"] = cli->policy;
+    if (!cli->options.residual.empty()) report["residual"] = cli->options.residual;
     report["task"] = task.name;
     report["reality"] = connection.address();
     report["log"] = cli->out;
@@ -133,11 +138,80 @@ void AddRun(CLI::App& parent, int& exit_code) {
   });
 }
 
+struct ResidualCli {
+  RealityCli reality;
+  std::string policy, task, out;
+  bool fresh = false;
+  pipeline::ResidualTrainOptions options;
+};
+
+// `train residual`: it talks to a robot, so it lives with eval rather than with the sim's
+// training commands.
+void AddTrainResidual(CLI::App& train, int& exit_code) {
+  auto cli = std::make_shared<ResidualCli>();
+  auto* c = train.add_subcommand(
+      "residual",
+      "SAM-RL's residual on a point-cloud policy, trained on reality with TD3 or SAC from a zero "
+      "start; resumes its checkpoint (JSON report)");
+  cli->reality.Add(c);
+  auto& o = cli->options;
+  c->add_option("--policy", cli->policy, "base point-cloud policy (train distill / train bc)")
+      ->required()
+      ->check(CLI::ExistingFile);
+  c->add_option("--task", cli->task, "task name or task.yaml")->required();
+  c->add_option("--out", cli->out,
+                "residual file; .curve.csv, .buffer and .state.json go beside it")
+      ->required();
+  c->add_option("--episodes", o.episodes, "episodes on the robot")->check(CLI::PositiveNumber);
+  c->add_option("--algorithm", o.agent.algorithm, "td3 or sac")
+      ->check(CLI::IsMember({"td3", "sac"}));
+  c->add_option("--critic-episodes", o.critic_episodes, "first episodes training the critics alone")
+      ->check(CLI::NonNegativeNumber);
+  c->add_option("--updates-per-step", o.updates_per_step, "gradient steps per recorded step")
+      ->check(CLI::NonNegativeNumber);
+  c->add_option("--scale", o.agent.residual_scale,
+                "largest correction per action component (1 = one full step)")
+      ->check(CLI::Range(0.01, 2.0));
+  c->add_option("--noise", o.agent.exploration_noise, "TD3 exploration noise")
+      ->check(CLI::Range(0.0, 1.0));
+  c->add_option("--dims", o.agent.residual_dims,
+                "action components corrected: 3 translation, 6 + rotation, 7 + gripper")
+      ->check(CLI::Range(1, 7));
+  c->add_option("--penalty", o.agent.residual_penalty, "weight on the correction's square")
+      ->check(CLI::NonNegativeNumber);
+  c->add_option("--level", o.level, "randomization level")->check(CLI::Range(0, 3));
+  c->add_option("--seed", o.seed, "episode seeds");
+  c->add_flag("--fresh", cli->fresh, "discard an existing checkpoint");
+  c->callback([cli, &exit_code] {
+    const sim::TaskSpec task = sim::LoadTaskSpec(cli->task);
+    reality::RealityConnection connection(cli->reality.Options());
+    core::Progress progress("residual", cli->options.episodes, "episodes");
+    const pipeline::ResidualTrainReport r = pipeline::TrainResidualOnReality(
+        connection.robot(), cli->policy, task, cli->options, cli->out, cli->fresh, &progress);
+    progress.Finish();
+    std::cout << nlohmann::json{{"residual", r.residual},
+                                {"curve_csv", r.curve_csv},
+                                {"policy", cli->policy},
+                                {"task", task.name},
+                                {"reality", connection.address()},
+                                {"episodes", r.episodes},
+                                {"successes", r.successes},
+                                {"resumed_from", r.resumed_from},
+                                {"transitions", r.transitions},
+                                {"updates", r.updates},
+                                {"seconds", r.seconds}}
+                     .dump(2)
+              << "\n";
+    exit_code = 0;
+  });
+}
+
 }  // namespace
 
 void AddPipelineCommands(CLI::App& parent, int& exit_code) {
   AddEval(parent, exit_code);
   AddRun(parent, exit_code);
+  AddTrainResidual(*parent.get_subcommand("train"), exit_code);
 }
 
 }  // namespace twinforge::app

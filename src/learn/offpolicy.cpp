@@ -107,6 +107,60 @@ ReplayBuffer::Batch ReplayBuffer::Sample(int n, core::Rng& rng) const {
           Rows(terminal_, rows, 1).view({-1})};
 }
 
+void ReplayBuffer::Save(const std::filesystem::path& path) const {
+  torch::serialize::OutputArchive archive;
+  const auto put = [&](const char* name, const std::vector<float>& v, int width) {
+    archive.write(name, torch::from_blob(const_cast<float*>(v.data()), {size_, width}).clone());
+  };
+  put("obs", obs_, obs_dim_);
+  put("base", base_, action_dim_);
+  put("action", action_, action_dim_);
+  put("reward", reward_, 1);
+  put("next_obs", next_obs_, obs_dim_);
+  put("next_base", next_base_, action_dim_);
+  put("terminal", terminal_, 1);
+  archive.write("next", torch::tensor(next_, torch::kInt64));
+  if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path());
+  const auto tmp = path.string() + ".tmp";
+  archive.save_to(tmp);
+  std::filesystem::rename(tmp, path);
+}
+
+void ReplayBuffer::Load(const std::filesystem::path& path) {
+  if (!std::filesystem::is_regular_file(path))
+    throw core::IoError("no replay buffer file at " + path.string());
+  try {
+    torch::serialize::InputArchive archive;
+    archive.load_from(path.string());
+    torch::Tensor t;
+    archive.read("obs", t);
+    const int64_t n = t.size(0);
+    if (n > capacity_ || t.size(1) != obs_dim_)
+      throw core::Error(path.string() + ": a replay buffer of other sizes");
+    const auto get = [&](const char* name, std::vector<float>& v, int width) {
+      torch::Tensor x;
+      archive.read(name, x);
+      if (x.size(0) != n || x.size(1) != width)
+        throw core::Error(path.string() + ": replay buffer field '" + name + "' has other sizes");
+      std::copy_n(x.contiguous().data_ptr<float>(), n * width, v.data());
+    };
+    get("obs", obs_, obs_dim_);
+    get("base", base_, action_dim_);
+    get("action", action_, action_dim_);
+    get("reward", reward_, 1);
+    get("next_obs", next_obs_, obs_dim_);
+    get("next_base", next_base_, action_dim_);
+    get("terminal", terminal_, 1);
+    torch::Tensor next;  // a fresh tensor: read() into a defined one of another shape misreads
+    archive.read("next", next);
+    size_ = n;
+    next_ = next.item<int64_t>() % capacity_;
+  } catch (const c10::Error& e) {
+    throw core::Error(path.string() + ": unreadable replay buffer (" + e.what_without_backtrace() +
+                      ")");
+  }
+}
+
 OffPolicyAgent::OffPolicyAgent(int obs_dim, int action_dim, const OffPolicyOptions& options)
     : obs_dim_(obs_dim),
       action_dim_(action_dim),
@@ -128,6 +182,11 @@ OffPolicyAgent::OffPolicyAgent(int obs_dim, int action_dim, const OffPolicyOptio
   auto critic_params = q1_->parameters();
   for (auto& p : q2_->parameters()) critic_params.push_back(p);
   critic_opt_ = std::make_unique<torch::optim::Adam>(critic_params, adam);
+  if (options.residual_dims > action_dim)
+    throw core::Error("off-policy agent: residual_dims " + std::to_string(options.residual_dims) +
+                      " exceeds the " + std::to_string(action_dim) + " action components");
+  mask_ = torch::ones({action_dim});
+  if (options.residual && options.residual_dims > 0) mask_.slice(0, options.residual_dims).zero_();
   log_alpha_ = torch::full({1}, std::log(options.initial_alpha), torch::requires_grad());
   alpha_opt_ = std::make_unique<torch::optim::Adam>(std::vector<torch::Tensor>{log_alpha_}, adam);
 }
@@ -154,11 +213,11 @@ std::pair<torch::Tensor, torch::Tensor> OffPolicyAgent::Squash(const torch::Tens
     if (eps.defined()) {
       // Gaussian log-likelihood of u, then the change of variables through scale * tanh.
       const torch::Tensor t = torch::tanh(u);
-      log_prob = (-0.5 * eps * eps - log_std - 0.5 * std::log(2 * M_PI)).sum(1) -
-                 torch::log(scale * (1 - t * t) + 1e-6).sum(1);
+      log_prob = ((-0.5 * eps * eps - log_std - 0.5 * std::log(2 * M_PI)) * mask_).sum(1) -
+                 (torch::log(scale * (1 - t * t) + 1e-6) * mask_).sum(1);
     }
   }
-  torch::Tensor action = scale * torch::tanh(u);
+  torch::Tensor action = scale * torch::tanh(u) * mask_;
   if (options_.residual) action = action + base;
   return {action.clamp(-1.0, 1.0), log_prob};
 }
@@ -187,7 +246,7 @@ void OffPolicyAgent::Act(const float* obs, const float* base, bool explore, core
     a = Squash(out, b, explore ? Normal(1, rng) : torch::Tensor()).first;
   } else {
     a = Squash(out, b, {}).first;
-    if (explore) a = (a + options_.exploration_noise * Normal(1, rng)).clamp(-1.0, 1.0);
+    if (explore) a = (a + options_.exploration_noise * Normal(1, rng) * mask_).clamp(-1.0, 1.0);
   }
   std::copy_n(a.data_ptr<float>(), action_dim_, action);
 }
@@ -248,6 +307,8 @@ OffPolicyStats OffPolicyAgent::Update(const ReplayBuffer& buffer, core::Rng& rng
   } else {
     actor_loss = -q1_->forward(pin).mean();
   }
+  if (options_.residual && options_.residual_penalty > 0)
+    actor_loss = actor_loss + options_.residual_penalty * (action - b.base).pow(2).mean();
   actor_opt_->zero_grad();
   actor_loss.backward();
   actor_opt_->step();
@@ -257,7 +318,7 @@ OffPolicyStats OffPolicyAgent::Update(const ReplayBuffer& buffer, core::Rng& rng
 
   if (sac_ && options_.learn_alpha) {
     const torch::Tensor alpha_loss =
-        -(log_alpha_ * (log_prob.detach() - double(action_dim_))).mean();
+        -(log_alpha_ * (log_prob.detach() - mask_.sum().item<double>())).mean();
     alpha_opt_->zero_grad();
     alpha_loss.backward();
     alpha_opt_->step();
@@ -299,6 +360,30 @@ void OffPolicyAgent::Save(const std::filesystem::path& path) {
   const auto tmp = path.string() + ".tmp";
   archive.save_to(tmp);
   std::filesystem::rename(tmp, path);
+}
+
+std::unique_ptr<OffPolicyAgent> OffPolicyAgent::Open(const std::filesystem::path& path) {
+  if (!std::filesystem::is_regular_file(path))
+    throw core::IoError("no off-policy agent file at " + path.string());
+  nlohmann::json state;
+  try {
+    torch::serialize::InputArchive archive;
+    archive.load_from(path.string());
+    c10::IValue text;
+    if (!archive.try_read("twinforge_offpolicy", text))
+      throw core::Error(path.string() +
+                        ": a LibTorch archive, but not a twinforge off-policy agent");
+    state = nlohmann::json::parse(text.toStringRef());
+  } catch (const c10::Error& e) {
+    throw core::Error(path.string() + ": not an off-policy agent (" + e.what_without_backtrace() +
+                      ")");
+  }
+  const auto options = core::ReadConfig<OffPolicyOptions>(
+      core::ParseConfigText(state.at("options").dump(), path.string() + " (options)"));
+  auto agent = std::make_unique<OffPolicyAgent>(state.at("obs_dim").get<int>(),
+                                                state.at("action_dim").get<int>(), options);
+  agent->Load(path);
+  return agent;
 }
 
 void OffPolicyAgent::Load(const std::filesystem::path& path) {

@@ -36,9 +36,15 @@ struct OffPolicyOptions {
   // SAC: the temperature starts here and is tuned toward an entropy of -action_dim.
   double initial_alpha = 0.1;
   bool learn_alpha = true;
-  // Residual mode and the largest delta it may add (per component, in action units).
+  // Residual mode, the largest delta it may add (per component, in action units), and a penalty
+  // on the delta's mean square in the actor's loss: where the critic sees no gain, the residual
+  // stays near zero instead of drifting.
   bool residual = false;
   double residual_scale = 0.5;
+  double residual_penalty = 0.0;
+  // How many leading action components the residual changes (0: all); the others are the base's.
+  // For an end-effector action, 3 corrects the translation and leaves rotation and gripper alone.
+  int residual_dims = 0;
   uint64_t seed = 1;  // network initialization
   template <class A>
   void Serialize(A& a) {
@@ -56,6 +62,8 @@ struct OffPolicyOptions {
     a("learn_alpha", learn_alpha);
     a("residual", residual);
     a("residual_scale", residual_scale);
+    a("residual_penalty", residual_penalty);
+    a("residual_dims", residual_dims);
     a("seed", seed);
     a.Require(algorithm == "td3" || algorithm == "sac", "algorithm", "td3 or sac");
     a.Require(hidden > 0 && batch > 0 && policy_delay > 0, "hidden",
@@ -64,6 +72,8 @@ struct OffPolicyOptions {
               "a positive learning rate, gamma in [0, 1), tau in (0, 1]");
     a.Require(initial_alpha > 0, "initial_alpha", "a positive temperature");
     a.Require(residual_scale > 0 && residual_scale <= 2, "residual_scale", "a value in (0, 2]");
+    a.Require(residual_penalty >= 0, "residual_penalty", "a non-negative weight");
+    a.Require(residual_dims >= 0, "residual_dims", "0 (all) or a number of components");
   }
 };
 
@@ -85,6 +95,11 @@ class ReplayBuffer {
   };
   // n transitions drawn uniformly with replacement.
   Batch Sample(int n, core::Rng& rng) const;
+
+  // The transitions as one LibTorch archive (temporary name, then renamed), and back; Load
+  // throws naming the file when its sizes differ.
+  void Save(const std::filesystem::path& path) const;
+  void Load(const std::filesystem::path& path);
 
  private:
   int obs_dim_, action_dim_;
@@ -115,6 +130,8 @@ class OffPolicyAgent {
   // renamed); Load throws naming the file when it does not fit these sizes and options.
   void Save(const std::filesystem::path& path);
   void Load(const std::filesystem::path& path);
+  // An agent built with the sizes and options stored in `path`, then loaded.
+  static std::unique_ptr<OffPolicyAgent> Open(const std::filesystem::path& path);
 
   int obs_dim() const { return obs_dim_; }
   int action_dim() const { return action_dim_; }
@@ -137,6 +154,7 @@ class OffPolicyAgent {
   torch::nn::Sequential actor_{nullptr}, actor_target_{nullptr};
   torch::nn::Sequential q1_{nullptr}, q2_{nullptr}, q1_target_{nullptr}, q2_target_{nullptr};
   torch::Tensor log_alpha_;
+  torch::Tensor mask_;  // [action_dim]: 1 where the actor acts (residual_dims), else 0
   std::unique_ptr<torch::optim::Adam> actor_opt_, critic_opt_, alpha_opt_;
   int64_t updates_ = 0;
 };

@@ -67,6 +67,15 @@ torch::Tensor PolicyNetImpl::ForwardNormalized(const torch::Tensor& points,
   return head_->forward(x);
 }
 
+torch::Tensor PolicyNetImpl::HeadInput(const torch::Tensor& points, const torch::Tensor& proprio) {
+  const torch::Tensor normalized = Normalize(proprio);
+  return encoder_ ? torch::cat({encoder_->forward(points), normalized}, 1) : normalized;
+}
+
+int PolicyNetImpl::HeadInputDim() const {
+  return config_.proprio_dim + (encoder_ ? PointEncoderImpl::kOut : 0);
+}
+
 torch::Tensor PolicyNetImpl::forward(const torch::Tensor& points, const torch::Tensor& proprio) {
   return ForwardNormalized(points, Normalize(proprio));
 }

@@ -58,6 +58,10 @@ class PolicyNetImpl : public torch::nn::Module {
   // for the privileged state. The buffers are saved with the weights; they stay 0 and 1 (no
   // change) for a policy trained by BC.
   torch::Tensor Normalize(const torch::Tensor& proprio) const;
+  // What the head reads: the encoder's features (when the policy sees points) and the normalized
+  // proprioception, [B, HeadInputDim()]. A residual policy reads it too.
+  torch::Tensor HeadInput(const torch::Tensor& points, const torch::Tensor& proprio);
+  int HeadInputDim() const;
   // The head's output for an already normalized input.
   torch::Tensor ForwardNormalized(const torch::Tensor& points, const torch::Tensor& normalized);
   // Log-likelihood of `actions` (discrete: [B] indices; continuous: [B, action_dim]), per row.

@@ -9,11 +9,10 @@
 #include "core/image.h"
 #include "core/log.h"
 #include "core/measure.h"
-#include "learn/bc.h"
 #include "learn/policy_net.h"
 #include "learn/rollout.h"
+#include "pipeline/policy_operator.h"
 #include "pipeline/run_directory.h"
-#include "reality/frame_cloud.h"
 #include "reality/teleop.h"
 #include "sim/env.h"
 
@@ -49,59 +48,6 @@ std::pair<double, double> BootstrapInterval(int successes, int trials, int resam
 
 namespace {
 
-// The policy at the controls: sees the camera's clouds and the proprioception, says "done" as
-// soon as the robot's oracle reports success.
-class PolicyOperator : public reality::Operator {
- public:
-  PolicyOperator(reality::Robot& robot, learn::PolicyNet& net, const sim::TaskSpec& task,
-                 const RealityEvalOptions& options, bool oracle)
-      : robot_(robot),
-        net_(net),
-        oracle_(oracle),
-        cloud_(sim::LoadRobotSpec(reality::RobotDescriptionPath(robot.Info().robot)),
-               task.workspace, {options.scene_points, options.arm_points},
-               sim::CorrectionPose(task.camera.correction)),
-        scene_(3 * options.scene_points),
-        arm_(3 * options.arm_points) {
-    choose_.sample = options.sample;
-    sampling_.n = net->config().points;
-    points_ = torch::empty({1, sampling_.n, 4});
-    proprio_ = torch::empty({1, sim::kProprioDim});
-  }
-
-  void Begin(uint64_t seed) { rng_ = core::Rng(seed, 0xe7a1); }
-
-  reality::OperatorInput Next(const reality::Observation& o) override {
-    reality::OperatorInput in;
-    if (oracle_ && robot_.QuerySuccess() == reality::SuccessAnswer::kSuccess) {
-      in.kind = reality::OperatorInput::Kind::kDone;
-      return in;
-    }
-    if (o.frames.empty()) throw core::Error("the robot sent an observation without a camera frame");
-    torch::NoGradGuard no_grad;
-    cloud_.Make(o, o.frames.front(), rng_, scene_.data(), arm_.data());
-    learn::SamplePoints(scene_.data(), int(scene_.size() / 3), arm_.data(), int(arm_.size() / 3),
-                        sampling_, false, rng_, points_.data_ptr<float>());
-    sim::MakeProprio(o.ee, 0.5 * o.gripper_width, 0.5 * o.gripper_width,
-                     proprio_.data_ptr<float>());
-    in.kind = reality::OperatorInput::Kind::kAction;
-    in.action = learn::ChooseAction(net_, net_->forward(points_, proprio_), choose_, rng_);
-    return in;
-  }
-  std::string name() const override { return "policy"; }
-
- private:
-  reality::Robot& robot_;
-  learn::PolicyNet& net_;
-  bool oracle_;
-  reality::FrameCloud cloud_;
-  std::vector<float> scene_, arm_;
-  learn::PolicyEvalOptions choose_;
-  learn::PointSampling sampling_;
-  torch::Tensor points_, proprio_;
-  core::Rng rng_{0};
-};
-
 nlohmann::json ToJson(const TrialRecord& t) {
   return {{"level", t.level},     {"trial", t.trial}, {"seed", t.seed},
           {"success", t.success}, {"steps", t.steps}, {"seconds", t.seconds}};
@@ -129,13 +75,19 @@ RealityEvalReport EvaluateOnReality(reality::Robot& robot, const std::filesystem
     throw core::Error(info.name + " cannot tell success by itself and no one was asked to judge");
 
   // The log: a header naming the policy and protocol, then one line per trial.
-  const nlohmann::json header = {{"policy", policy.string()},
-                                 {"policy_hash", Fingerprint().AddFile(policy).Hex()},
-                                 {"task", task.name},
-                                 {"robot", info.name},
-                                 {"seed", options.seed},
-                                 {"sample", options.sample},
-                                 {"points", {options.scene_points, options.arm_points}}};
+  nlohmann::json header = {{"policy", policy.string()},
+                           {"policy_hash", Fingerprint().AddFile(policy).Hex()},
+                           {"task", task.name},
+                           {"robot", info.name},
+                           {"seed", options.seed},
+                           {"sample", options.sample},
+                           {"points", {options.scene_points, options.arm_points}}};
+  std::unique_ptr<learn::OffPolicyAgent> residual;
+  if (!options.residual.empty()) {
+    residual = learn::OffPolicyAgent::Open(options.residual);
+    header["residual"] = options.residual.string();
+    header["residual_hash"] = Fingerprint().AddFile(options.residual).Hex();
+  }
   std::map<std::pair<int, int>, TrialRecord> done;
   if (std::filesystem::exists(log) && std::filesystem::file_size(log) > 0) {
     std::ifstream in(log);
@@ -144,10 +96,12 @@ RealityEvalReport EvaluateOnReality(reality::Robot& robot, const std::filesystem
     nlohmann::json old = nlohmann::json::parse(line, nullptr, false);
     if (old.is_discarded() || old.value("policy_hash", "") != header["policy_hash"] ||
         old.value("task", "") != task.name || old.value("seed", uint64_t(0)) != options.seed ||
-        old.value("sample", !options.sample) != options.sample)
-      throw core::Error(log.string() +
-                        ": a trial log of another policy, task or protocol; give another --out or "
-                        "remove it");
+        old.value("sample", !options.sample) != options.sample ||
+        old.value("residual_hash", "") != header.value("residual_hash", ""))
+      throw core::Error(
+          log.string() +
+          ": a trial log of another policy, residual, task or protocol; give another --out or "
+          "remove it");
     for (int n = 2; std::getline(in, line); ++n) {
       const nlohmann::json t = nlohmann::json::parse(line, nullptr, false);
       if (t.is_discarded()) {
@@ -166,8 +120,10 @@ RealityEvalReport EvaluateOnReality(reality::Robot& robot, const std::filesystem
   std::ofstream out(log, std::ios::app);
   if (!out) throw core::IoError("cannot write " + log.string());
 
-  PolicyOperator op(robot, net, task, options, info.has_success_oracle);
   reality::ActionClient client(robot, task.control.limits);
+  PolicyOperator op(robot, net, task, options.scene_points, options.arm_points, options.sample,
+                    info.has_success_oracle);
+  op.SetResidual(residual.get(), &client, false);
   RealityEvalReport report;
   for (int level : options.levels) {
     bool shown[2] = {false, false};  // a failure's frame, a success's frame

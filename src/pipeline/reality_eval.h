@@ -34,6 +34,8 @@ struct RealityEvalOptions {
   // If set: the camera's last frame of each level's first success and first failure, as
   // PNG files named level<L>_trial<i>_<success|failure>.png.
   std::filesystem::path frames;
+  // If set: a residual (`train residual`) adds its correction to the policy's actions.
+  std::filesystem::path residual;
 };
 
 struct TrialRecord {

@@ -8,10 +8,14 @@
 #include "core/test_support.h"
 #include "learn/policy_net.h"
 #include "learn/torch_runtime.h"
+#include "pipeline/test_support.h"
 #include "reality/proxy_reality.h"
 
 namespace twinforge::pipeline {
 namespace {
+
+using testing::Counted;
+using testing::Policy;
 
 TEST(BootstrapInterval, BracketsTheRateAndNarrowsWithMoreTrials) {
   core::Rng rng(1);
@@ -25,48 +29,6 @@ TEST(BootstrapInterval, BracketsTheRateAndNarrowsWithMoreTrials) {
   const auto [lo0, hi0] = BootstrapInterval(0, 10, 500, rng);
   EXPECT_EQ(lo0, 0.0);
   EXPECT_EQ(hi0, 0.0);
-}
-
-// The proxy reality behind a counter of resets, with or without its success oracle.
-class Counted : public reality::Robot {
- public:
-  Counted(reality::ProxyReality& inner, bool oracle) : inner_(inner), oracle_(oracle) {}
-  reality::RobotInfo Info() override {
-    reality::RobotInfo info = inner_.Info();
-    info.has_success_oracle = oracle_;
-    return info;
-  }
-  reality::Observation Observe(bool with_frames) override { return inner_.Observe(with_frames); }
-  void SendTargets(const sim::JointTargets& targets) override {
-    ++actions;
-    inner_.SendTargets(targets);
-  }
-  reality::Observation Reset(const reality::ResetRequest& request) override {
-    ++resets;
-    return inner_.Reset(request);
-  }
-  reality::SuccessAnswer QuerySuccess() override {
-    return oracle_ ? inner_.QuerySuccess() : reality::SuccessAnswer::kUnknown;
-  }
-  int resets = 0, actions = 0;
-
- private:
-  reality::ProxyReality& inner_;
-  bool oracle_;
-};
-
-std::filesystem::path Policy(const std::filesystem::path& dir, int points, int seed) {
-  learn::PolicyConfig config;
-  if (points > 0) config.points = points;
-  if (points == 0) {
-    config.point_features = 0;
-    config.proprio_dim = 17;
-  }
-  torch::manual_seed(seed);
-  learn::PolicyNet net(config);
-  const auto path = dir / ("policy" + std::to_string(points) + "_" + std::to_string(seed) + ".pt");
-  learn::SavePolicy(net, path);
-  return path;
 }
 
 TEST(EvaluateOnReality, LogsEveryTrialResumesAndRefusesAnotherPolicysLog) {
