@@ -107,18 +107,17 @@ ReplayBuffer::Batch ReplayBuffer::Sample(int n, core::Rng& rng) const {
           Rows(terminal_, rows, 1).view({-1})};
 }
 
-void ReplayBuffer::Save(const std::filesystem::path& path) const {
+std::vector<ReplayBuffer::Field> ReplayBuffer::Fields() {
+  return {{"obs", &obs_, obs_dim_},           {"base", &base_, action_dim_},
+          {"action", &action_, action_dim_},  {"reward", &reward_, 1},
+          {"next_obs", &next_obs_, obs_dim_}, {"next_base", &next_base_, action_dim_},
+          {"terminal", &terminal_, 1}};
+}
+
+void ReplayBuffer::Save(const std::filesystem::path& path) {
   torch::serialize::OutputArchive archive;
-  const auto put = [&](const char* name, const std::vector<float>& v, int width) {
-    archive.write(name, torch::from_blob(const_cast<float*>(v.data()), {size_, width}).clone());
-  };
-  put("obs", obs_, obs_dim_);
-  put("base", base_, action_dim_);
-  put("action", action_, action_dim_);
-  put("reward", reward_, 1);
-  put("next_obs", next_obs_, obs_dim_);
-  put("next_base", next_base_, action_dim_);
-  put("terminal", terminal_, 1);
+  for (const Field& f : Fields())
+    archive.write(f.name, torch::from_blob(f.data->data(), {size_, f.width}).clone());
   archive.write("next", torch::tensor(next_, torch::kInt64));
   if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path());
   const auto tmp = path.string() + ".tmp";
@@ -132,29 +131,24 @@ void ReplayBuffer::Load(const std::filesystem::path& path) {
   try {
     torch::serialize::InputArchive archive;
     archive.load_from(path.string());
-    torch::Tensor t;
-    archive.read("obs", t);
-    const int64_t n = t.size(0);
-    if (n > capacity_ || t.size(1) != obs_dim_)
-      throw core::Error(path.string() + ": a replay buffer of other sizes");
-    const auto get = [&](const char* name, std::vector<float>& v, int width) {
+    // Fresh tensors for every read: read() into a defined tensor of another shape misreads.
+    std::vector<torch::Tensor> read;
+    for (const Field& f : Fields()) {
       torch::Tensor x;
-      archive.read(name, x);
-      if (x.size(0) != n || x.size(1) != width)
-        throw core::Error(path.string() + ": replay buffer field '" + name + "' has other sizes");
-      std::copy_n(x.contiguous().data_ptr<float>(), n * width, v.data());
-    };
-    get("obs", obs_, obs_dim_);
-    get("base", base_, action_dim_);
-    get("action", action_, action_dim_);
-    get("reward", reward_, 1);
-    get("next_obs", next_obs_, obs_dim_);
-    get("next_base", next_base_, action_dim_);
-    get("terminal", terminal_, 1);
-    torch::Tensor next;  // a fresh tensor: read() into a defined one of another shape misreads
+      archive.read(f.name, x);
+      if (x.dim() != 2 || x.size(1) != f.width || x.size(0) > capacity_ ||
+          (!read.empty() && x.size(0) != read.front().size(0)))
+        throw core::Error(path.string() + ": replay buffer field '" + f.name +
+                          "' does not fit a buffer of these sizes");
+      read.push_back(x.contiguous());
+    }
+    torch::Tensor next;
     archive.read("next", next);
-    size_ = n;
+    size_ = read.front().size(0);
     next_ = next.item<int64_t>() % capacity_;
+    const auto fields = Fields();
+    for (std::size_t i = 0; i < fields.size(); ++i)
+      std::copy_n(read[i].data_ptr<float>(), size_ * fields[i].width, fields[i].data->data());
   } catch (const c10::Error& e) {
     throw core::Error(path.string() + ": unreadable replay buffer (" + e.what_without_backtrace() +
                       ")");

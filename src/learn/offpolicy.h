@@ -98,10 +98,17 @@ class ReplayBuffer {
 
   // The transitions as one LibTorch archive (temporary name, then renamed), and back; Load
   // throws naming the file when its sizes differ.
-  void Save(const std::filesystem::path& path) const;
+  void Save(const std::filesystem::path& path);
   void Load(const std::filesystem::path& path);
 
  private:
+  struct Field {
+    const char* name;
+    std::vector<float>* data;
+    int width;
+  };
+  std::vector<Field> Fields();  // every per-transition array, for saving and loading
+
   int obs_dim_, action_dim_;
   int64_t capacity_, size_ = 0, next_ = 0;
   std::vector<float> obs_, base_, action_, reward_, next_obs_, next_base_, terminal_;

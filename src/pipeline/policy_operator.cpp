@@ -7,6 +7,18 @@
 
 namespace twinforge::pipeline {
 
+learn::PolicyNet LoadRobotPolicy(const std::filesystem::path& path, const sim::TaskSpec& task) {
+  learn::PolicyNet net = learn::LoadPolicy(path);
+  if (net->config().point_features == 0)
+    throw core::Error(path.string() +
+                      ": a state policy needs the privileged state, which a robot does not have; "
+                      "distil it into a point-cloud policy first (`train distill`)");
+  sim::Task sim_task(task);
+  learn::CheckPolicyFitsTask(net->config(), sim_task, path.string());
+  net->eval();
+  return net;
+}
+
 PolicyOperator::PolicyOperator(reality::Robot& robot, learn::PolicyNet& net,
                                const sim::TaskSpec& task, int scene_points, int arm_points,
                                bool sample, bool oracle)

@@ -19,6 +19,10 @@
 
 namespace twinforge::pipeline {
 
+// A policy to run on a robot: loaded, checked against the task, in inference mode. A state
+// policy is refused (a robot has no privileged state).
+learn::PolicyNet LoadRobotPolicy(const std::filesystem::path& path, const sim::TaskSpec& task);
+
 class PolicyOperator : public reality::Operator {
  public:
   PolicyOperator(reality::Robot& robot, learn::PolicyNet& net, const sim::TaskSpec& task,

@@ -62,14 +62,7 @@ RealityEvalReport EvaluateOnReality(reality::Robot& robot, const std::filesystem
   const auto start = core::Clock::now();
   if (options.trials <= 0 || options.levels.empty())
     throw core::ConfigError("eval", "trials", "at least one trial at one level");
-  learn::PolicyNet net = learn::LoadPolicy(policy);
-  if (net->config().point_features == 0)
-    throw core::Error(policy.string() +
-                      ": a state policy needs the privileged state, which a robot does not have; "
-                      "distil it into a point-cloud policy first (`train distill`)");
-  sim::Task sim_task(task);
-  learn::CheckPolicyFitsTask(net->config(), sim_task, policy.string());
-  net->eval();
+  learn::PolicyNet net = LoadRobotPolicy(policy, task);
   const reality::RobotInfo info = robot.Info();
   if (!info.has_success_oracle && !judge)
     throw core::Error(info.name + " cannot tell success by itself and no one was asked to judge");

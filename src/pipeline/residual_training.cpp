@@ -98,14 +98,7 @@ ResidualTrainReport TrainResidualOnReality(reality::Robot& robot,
   const auto start = core::Clock::now();
   ResidualTrainOptions options = given;
   options.agent.residual = true;
-  learn::PolicyNet net = learn::LoadPolicy(base_policy);
-  if (net->config().point_features == 0)
-    throw core::Error(base_policy.string() +
-                      ": a state policy needs the privileged state, which a robot does not have; "
-                      "the residual's base must be a point-cloud policy (`train distill`)");
-  sim::Task sim_task(task);
-  learn::CheckPolicyFitsTask(net->config(), sim_task, base_policy.string());
-  net->eval();
+  learn::PolicyNet net = LoadRobotPolicy(base_policy, task);
   const reality::RobotInfo info = robot.Info();
   if (!info.has_success_oracle)
     throw core::Error(info.name +
