@@ -107,4 +107,14 @@ ViewChoice SampleView(const real2sim::RasterMesh& scene, const core::PinholeIntr
   return best;
 }
 
+ViewChoice ChooseView(const real2sim::RasterMesh& scene, const core::PinholeIntrinsics& intrinsics,
+                      const OrbitMount& mount, const ViewScore& score, core::Rng& rng,
+                      const ViewSearchOptions& options) {
+  const ViewChoice sampled = SampleView(scene, intrinsics, mount, score, rng, options);
+  ViewChoice refined =
+      AscendView(scene, intrinsics, mount, score, sampled.azimuth, sampled.elevation, options);
+  refined.scores.insert(refined.scores.begin(), sampled.scores.begin(), sampled.scores.end());
+  return refined;
+}
+
 }  // namespace twinforge::samrl

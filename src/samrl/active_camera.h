@@ -61,4 +61,11 @@ ViewChoice SampleView(const real2sim::RasterMesh& scene, const core::PinholeIntr
                       const OrbitMount& mount, const ViewScore& score, core::Rng& rng,
                       const ViewSearchOptions& options = {});
 
+// Both: the best of options.samples poses, then gradient ascent from it. From a view where the
+// score is flat (the target hidden, a learned Q near zero all around), ascent alone has nothing
+// to follow; the samples find the slope.
+ViewChoice ChooseView(const real2sim::RasterMesh& scene, const core::PinholeIntrinsics& intrinsics,
+                      const OrbitMount& mount, const ViewScore& score, core::Rng& rng,
+                      const ViewSearchOptions& options = {});
+
 }  // namespace twinforge::samrl

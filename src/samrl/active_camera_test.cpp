@@ -4,46 +4,15 @@
 
 #include "core/error.h"
 #include "learn/torch_runtime.h"
+#include "samrl/test_scenes.h"
 
 namespace twinforge::samrl {
 namespace {
 
-using real2sim::BoxMesh;
-
-// A red target on a blue table behind a blue wall on its +x side: seen from +x (azimuth 0) the
-// wall hides it; seen from the sides or from above it is in full view.
-real2sim::RasterMesh OccludedTarget() {
-  const Eigen::Vector3d blue(0, 0, 1), red(1, 0, 0);
-  return real2sim::JoinMeshes({BoxMesh({0.5, 0, -0.02}, {0.8, 0.8, 0.04}, blue),
-                               BoxMesh({0.5, 0, 0.04}, {0.08, 0.08, 0.08}, red),
-                               BoxMesh({0.62, 0, 0.12}, {0.03, 0.5, 0.24}, blue)});
-}
-
-core::PinholeIntrinsics Small() {
-  core::PinholeIntrinsics k;
-  k.width = 40;
-  k.height = 30;
-  k.fx = k.fy = 40;
-  k.cx = 19.5;
-  k.cy = 14.5;
-  return k;
-}
-
-// A known score: how much of the image the red target covers.
-torch::Tensor VisibleTarget(const real2sim::SoftImage& image) {
-  return image.rgb.select(2, 0).mean() * 100.0;
-}
-
-OrbitMount Mount() {
-  OrbitMount m;
-  m.center = Eigen::Vector3d(0.5, 0, 0.05);
-  m.radius = 0.7;
-  m.min_azimuth = -1.2;
-  m.max_azimuth = 1.2;
-  m.min_elevation = 0.15;
-  m.max_elevation = 1.2;
-  return m;
-}
+using testing::Mount;
+using testing::OccludedTarget;
+using testing::Small;
+using testing::VisibleTarget;
 
 TEST(ActiveCamera, OrbitPoseLooksAtTheCentre) {
   const OrbitMount mount = Mount();

@@ -1,0 +1,66 @@
+// SAM-RL's sensing-aware Q-function: Q(view, action), the return expected when the actor takes
+// `action` having seen the scene from a camera pose, learned by regressing the returns of
+// simulated episodes on the views they were taken with. The view is the soft rasterizer's depth
+// and silhouette, so Q is differentiable in the camera pose and AscendView can choose the view.
+//
+// Includes <torch/torch.h>: include it only from .cpp files and tests.
+#pragma once
+
+#include <torch/torch.h>
+
+#include <filesystem>
+#include <vector>
+
+#include "core/pinhole.h"
+#include "core/rng.h"
+#include "real2sim/calibrate/soft_render.h"
+#include "samrl/active_camera.h"
+
+namespace twinforge::samrl {
+
+// A view as the network reads it: [2, H, W] float, depth (m, 0 = nothing) and silhouette.
+torch::Tensor ViewInput(const real2sim::SoftImage& image);
+
+// Two strided convolutions over the view, then an MLP with the action: a scalar.
+class SensingQNetImpl : public torch::nn::Module {
+ public:
+  SensingQNetImpl(int height, int width, int action_dim, int hidden = 128);
+  // views [B, 2, H, W], actions [B, action_dim] -> [B]
+  torch::Tensor forward(const torch::Tensor& views, const torch::Tensor& actions);
+  int action_dim() const { return action_dim_; }
+
+ private:
+  int action_dim_;
+  torch::nn::Sequential conv_{nullptr}, head_{nullptr};
+};
+TORCH_MODULE(SensingQNet);
+
+// One simulated episode's record: the view its actor saw, its action (or plan parameters) and
+// its return.
+struct ViewReturn {
+  torch::Tensor view;    // [2, H, W]
+  torch::Tensor action;  // [action_dim]
+  double ret = 0;
+};
+
+struct SensingQOptions {
+  int steps = 400;
+  int batch = 32;
+  double learning_rate = 1e-3;
+  double validation = 0.2;  // share of the samples held out
+  uint64_t seed = 1;
+};
+
+struct SensingQReport {
+  double train_loss = 0, valid_loss = 0;  // mean squared error at the end
+  double valid_baseline = 0;  // predicting the mean training return on the held-out samples
+};
+
+// Fits `net` to the samples by mean squared error (Adam, minibatches drawn from options.seed).
+SensingQReport FitSensingQ(SensingQNet& net, const std::vector<ViewReturn>& samples,
+                           const SensingQOptions& options = {});
+
+// Q of the view rendered from a pose, for one action: the score AscendView climbs.
+ViewScore QScore(SensingQNet& net, const torch::Tensor& action);
+
+}  // namespace twinforge::samrl
