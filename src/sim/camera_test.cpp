@@ -162,3 +162,56 @@ TEST(Camera, ACalibrationCorrectionMovesTheCameraInItsOwnFrame) {
 
 }  // namespace
 }  // namespace twinforge::sim
+
+namespace twinforge::sim {
+namespace {
+
+// What the camera at `spec` sees where the hole's top projects: the geom's name and the depth
+// there against the hole's own depth (m).
+struct AtTheHole {
+  std::string geom;
+  double depth = 0, hole_depth = 0;
+};
+AtTheHole LookAtTheHole(const char* task_name, const CameraSpec& spec, uint64_t seed) {
+  auto task = std::make_shared<const Task>(LoadTaskSpec(task_name));
+  Env env(task);
+  env.Reset(seed, 1);
+  RayCaster caster(MakeCamera(spec), env.model());
+  const auto& k = caster.camera().intrinsics;
+  std::vector<float> depth(k.width * k.height);
+  std::vector<int> geom(k.width * k.height);
+  caster.Render(env.model(), env.data(), env.base(), depth.data(), nullptr, true, geom.data());
+  const int site = mj_name2id(env.model(), mjOBJ_SITE, "hole_top");
+  const Eigen::Vector3d p = caster.camera().pose.Inverse() * env.SitePose(site).translation;
+  const int u = int(std::lround(k.fx * p.x() / p.z() + k.cx));
+  const int v = int(std::lround(k.fy * p.y() / p.z() + k.cy));
+  EXPECT_TRUE(u >= 0 && u < k.width && v >= 0 && v < k.height) << task_name << " " << u << "," << v;
+  const int i = v * k.width + u;
+  const char* name = geom[i] >= 0 ? mj_id2name(env.model(), mjOBJ_GEOM, geom[i]) : nullptr;
+  return {name ? name : "", depth[i], p.z()};
+}
+
+// The occluded variant hides the hole from the task camera behind its panel, at every level-1
+// placement tried; without the panel the camera sees the hole, and a camera moved to the side
+// sees it past the panel.
+TEST(Camera, ThePanelHidesTheHoleFromTheTaskCameraOnly) {
+  CameraSpec side = LoadTaskSpec("peg_insertion_occluded").camera;
+  side.position = {0.55, 0.75, 0.5};
+  side.look_at = {0.55, 0.15, 0.02};
+  for (uint64_t seed = 1; seed <= 5; ++seed) {
+    const AtTheHole hidden = LookAtTheHole("peg_insertion_occluded",
+                                           LoadTaskSpec("peg_insertion_occluded").camera, seed);
+    EXPECT_EQ(hidden.geom, "panel") << "seed " << seed;
+    EXPECT_LT(hidden.depth, hidden.hole_depth - 0.1) << "seed " << seed;
+    const AtTheHole plain =
+        LookAtTheHole("peg_insertion", LoadTaskSpec("peg_insertion").camera, seed);
+    EXPECT_NE(plain.geom, "panel");
+    EXPECT_NEAR(plain.depth, plain.hole_depth, 0.05) << "seed " << seed;
+    const AtTheHole moved = LookAtTheHole("peg_insertion_occluded", side, seed);
+    EXPECT_NE(moved.geom, "panel") << "seed " << seed;
+    EXPECT_NEAR(moved.depth, moved.hole_depth, 0.05) << "seed " << seed;
+  }
+}
+
+}  // namespace
+}  // namespace twinforge::sim

@@ -43,6 +43,32 @@ void AbsolutizeAssets(XMLElement* root, const std::filesystem::path& source) {
   }
 }
 
+// Replaces each top-level <include file="..."/> (a path relative to the including file) by the
+// children of that file's <mujoco> root, its own includes expanded and asset paths made
+// absolute first: a scene variant is its base scene plus what it adds.
+void ExpandIncludes(XMLDocument& doc, XMLElement* root, const std::filesystem::path& source,
+                    int depth = 0) {
+  for (XMLElement* inc = root->FirstChildElement("include"); inc;) {
+    XMLElement* next = inc->NextSiblingElement("include");
+    const char* file = inc->Attribute("file");
+    if (!file)
+      throw core::ConfigError(source.string(), "include", "an <include> needs a file attribute");
+    if (depth >= 8)
+      throw core::ConfigError(source.string(), "include",
+                              "includes nested deeper than 8 (a loop?)");
+    const std::filesystem::path path = (source.parent_path() / file).lexically_normal();
+    XMLDocument included;
+    Parse(included, path);
+    XMLElement* inc_root = included.RootElement();
+    AbsolutizeAssets(inc_root, path);
+    ExpandIncludes(included, inc_root, path, depth + 1);
+    for (const XMLNode* child = inc_root->FirstChild(); child; child = child->NextSibling())
+      if (child->ToElement()) root->InsertEndChild(child->DeepClone(&doc));
+    root->DeleteChild(inc);
+    inc = next;
+  }
+}
+
 // Appends deep copies of every child of each <section> in `from` to `into`'s <section>.
 void CopySection(XMLDocument& out, XMLElement* into_root, XMLElement* from_root,
                  const char* section, XMLElement* into = nullptr) {
@@ -74,6 +100,7 @@ std::string AssembleMjcf(const MjcfParts& parts) {
   XMLElement* scene_root = scene.RootElement();
   AbsolutizeAssets(robot_root, parts.robot);
   AbsolutizeAssets(scene_root, parts.scene);
+  ExpandIncludes(scene, scene_root, parts.scene);
 
   XMLElement* root = out.NewElement("mujoco");
   out.InsertFirstChild(root);

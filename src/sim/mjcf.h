@@ -19,7 +19,8 @@ struct MjcfParts {
 // Merges the parts into one MJCF document: compiler/option from twinforge, defaults, assets,
 // bodies, actuators, contacts, equalities, tendons and sensors from both files. Relative asset
 // file paths are made absolute so the result compiles from memory. Scene files must keep their
-// defaults in named classes (two files cannot both set the unnamed top-level default).
+// defaults in named classes (two files cannot both set the unnamed top-level default). A scene
+// may <include file="..."/> another scene (path relative to it) at its top level.
 // Throws ConfigError naming the file if either is not well-formed MJCF.
 std::string AssembleMjcf(const MjcfParts& parts);
 
