@@ -31,6 +31,24 @@ void CheckMount(const OrbitMount& mount) {
 
 }  // namespace
 
+TargetView TargetVisibility(real2sim::TwinGeometry& twin, const std::array<double, 7>& q,
+                            double gripper_width, const std::vector<std::string>& target_bodies) {
+  const mjModel* m = twin.model();
+  std::vector<int> bodies;
+  for (const std::string& name : target_bodies) {
+    const int b = mj_name2id(m, mjOBJ_BODY, name.c_str());
+    if (b < 0) throw core::Error("active camera: the twin has no body named '" + name + "'");
+    bodies.push_back(b);
+  }
+  const auto color = [&](int geom) {
+    const bool target =
+        std::find(bodies.begin(), bodies.end(), m->geom_bodyid[geom]) != bodies.end();
+    return target ? Eigen::Vector3d(1, 0, 0) : Eigen::Vector3d(0, 0, 1);
+  };
+  return {twin.Posed(q, gripper_width, color),
+          [](const real2sim::SoftImage& image) { return image.rgb.select(2, 0).mean() * 100.0; }};
+}
+
 real2sim::CameraTensor OrbitPose(const OrbitMount& mount, const torch::Tensor& angles) {
   const torch::Tensor az = angles[0], el = angles[1];
   const torch::Tensor center =

@@ -17,6 +17,7 @@
 #include "core/rng.h"
 #include "core/se3.h"
 #include "real2sim/calibrate/soft_render.h"
+#include "real2sim/calibrate/twin_geometry.h"
 
 namespace twinforge::samrl {
 
@@ -49,6 +50,17 @@ struct ViewChoice {
   double score = 0;
   std::vector<double> scores;  // per ascent step or per sample
 };
+
+// The twin posed at arm joints `q`, the geoms of `target_bodies` red and the rest blue, and the
+// score that counts the red: the percentage of a view the targets fill. A view score for "where
+// must the camera be to see the hole" that needs no learning. Throws core::Error naming a body
+// the twin does not have.
+struct TargetView {
+  real2sim::RasterMesh mesh;
+  ViewScore score;
+};
+TargetView TargetVisibility(real2sim::TwinGeometry& twin, const std::array<double, 7>& q,
+                            double gripper_width, const std::vector<std::string>& target_bodies);
 
 // Gradient ascent on `score` from (azimuth, elevation), the angles kept within the mount's
 // limits. Returns the best pose visited.
