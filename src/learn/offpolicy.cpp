@@ -323,27 +323,33 @@ OffPolicyStats OffPolicyAgent::Update(const ReplayBuffer& buffer, core::Rng& rng
   return stats;
 }
 
+std::vector<std::pair<const char*, torch::nn::Module*>> OffPolicyAgent::Modules() {
+  return {{"actor", actor_.get()},
+          {"actor_target", actor_target_.get()},
+          {"q1", q1_.get()},
+          {"q2", q2_.get()},
+          {"q1_target", q1_target_.get()},
+          {"q2_target", q2_target_.get()}};
+}
+
+std::vector<std::pair<const char*, torch::optim::Optimizer*>> OffPolicyAgent::Optimizers() {
+  return {{"actor_opt", actor_opt_.get()},
+          {"critic_opt", critic_opt_.get()},
+          {"alpha_opt", alpha_opt_.get()}};
+}
+
 void OffPolicyAgent::Save(const std::filesystem::path& path) {
   torch::serialize::OutputArchive archive;
-  const auto put = [&](const char* name, torch::nn::Module& m) {
+  for (const auto& [name, module] : Modules()) {
     torch::serialize::OutputArchive sub;
-    m.save(sub);
+    module->save(sub);
     archive.write(name, sub);
-  };
-  const auto put_opt = [&](const char* name, torch::optim::Optimizer& o) {
+  }
+  for (const auto& [name, optimizer] : Optimizers()) {
     torch::serialize::OutputArchive sub;
-    o.save(sub);
+    optimizer->save(sub);
     archive.write(name, sub);
-  };
-  put("actor", *actor_);
-  put("actor_target", *actor_target_);
-  put("q1", *q1_);
-  put("q2", *q2_);
-  put("q1_target", *q1_target_);
-  put("q2_target", *q2_target_);
-  put_opt("actor_opt", *actor_opt_);
-  put_opt("critic_opt", *critic_opt_);
-  put_opt("alpha_opt", *alpha_opt_);
+  }
   archive.write("log_alpha", log_alpha_.detach());
   nlohmann::json state = {{"obs_dim", obs_dim_},
                           {"action_dim", action_dim_},
@@ -356,22 +362,35 @@ void OffPolicyAgent::Save(const std::filesystem::path& path) {
   std::filesystem::rename(tmp, path);
 }
 
-std::unique_ptr<OffPolicyAgent> OffPolicyAgent::Open(const std::filesystem::path& path) {
+namespace {
+
+// Opens an agent file and returns its state (sizes, options, counters).
+nlohmann::json OpenAgentFile(const std::filesystem::path& path,
+                             torch::serialize::InputArchive& archive) {
   if (!std::filesystem::is_regular_file(path))
     throw core::IoError("no off-policy agent file at " + path.string());
-  nlohmann::json state;
+  c10::IValue text;
   try {
-    torch::serialize::InputArchive archive;
     archive.load_from(path.string());
-    c10::IValue text;
     if (!archive.try_read("twinforge_offpolicy", text))
       throw core::Error(path.string() +
                         ": a LibTorch archive, but not a twinforge off-policy agent");
-    state = nlohmann::json::parse(text.toStringRef());
   } catch (const c10::Error& e) {
     throw core::Error(path.string() + ": not an off-policy agent (" + e.what_without_backtrace() +
                       ")");
   }
+  const auto state = nlohmann::json::parse(text.toStringRef(), nullptr, false);
+  if (state.is_discarded() || !state.contains("options") || !state.contains("obs_dim") ||
+      !state.contains("action_dim") || !state.contains("updates"))
+    throw core::Error(path.string() + ": an off-policy agent whose state is unreadable");
+  return state;
+}
+
+}  // namespace
+
+std::unique_ptr<OffPolicyAgent> OffPolicyAgent::Open(const std::filesystem::path& path) {
+  torch::serialize::InputArchive archive;
+  const nlohmann::json state = OpenAgentFile(path, archive);
   const auto options = core::ReadConfig<OffPolicyOptions>(
       core::ParseConfigText(state.at("options").dump(), path.string() + " (options)"));
   auto agent = std::make_unique<OffPolicyAgent>(state.at("obs_dim").get<int>(),
@@ -381,56 +400,39 @@ std::unique_ptr<OffPolicyAgent> OffPolicyAgent::Open(const std::filesystem::path
 }
 
 void OffPolicyAgent::Load(const std::filesystem::path& path) {
-  if (!std::filesystem::is_regular_file(path))
-    throw core::IoError("no off-policy agent file at " + path.string());
+  torch::serialize::InputArchive archive;
+  const nlohmann::json state = OpenAgentFile(path, archive);
+  const nlohmann::json mine = core::ToJson(options_);
+  for (const char* key : {"algorithm", "residual", "hidden", "residual_dims"})
+    if (state.at("options").value(key, nlohmann::json()) != mine.at(key))
+      throw core::Error(path.string() + ": an agent with another " + key + " (" +
+                        state.at("options").value(key, nlohmann::json()).dump() + ", not " +
+                        mine.at(key).dump() + ")");
+  if (state.at("obs_dim") != obs_dim_ || state.at("action_dim") != action_dim_)
+    throw core::Error(path.string() + ": an agent of other sizes (obs " +
+                      state.at("obs_dim").dump() + ", action " + state.at("action_dim").dump() +
+                      ", not " + std::to_string(obs_dim_) + " and " + std::to_string(action_dim_) +
+                      ")");
   try {
-    torch::serialize::InputArchive archive;
-    archive.load_from(path.string());
-    c10::IValue text;
-    if (!archive.try_read("twinforge_offpolicy", text))
-      throw core::Error(path.string() +
-                        ": a LibTorch archive, but not a twinforge off-policy agent");
-    const auto state = nlohmann::json::parse(text.toStringRef());
-    const nlohmann::json mine = core::ToJson(options_);
-    if (state.at("obs_dim") != obs_dim_ || state.at("action_dim") != action_dim_ ||
-        state.at("options").at("algorithm") != mine.at("algorithm") ||
-        state.at("options").at("residual") != mine.at("residual") ||
-        state.at("options").at("hidden") != mine.at("hidden"))
-      throw core::Error(path.string() + ": an agent of other sizes or algorithm (obs " +
-                        state.at("obs_dim").dump() + ", action " + state.at("action_dim").dump() +
-                        ", " + state.at("options").at("algorithm").dump() + ")");
-    const auto get = [&](const char* name, torch::nn::Module& m) {
+    for (const auto& [name, module] : Modules()) {
       torch::serialize::InputArchive sub;
       archive.read(name, sub);
-      m.load(sub);
-    };
-    const auto get_opt = [&](const char* name, torch::optim::Optimizer& o) {
+      module->load(sub);
+    }
+    for (const auto& [name, optimizer] : Optimizers()) {
       torch::serialize::InputArchive sub;
       archive.read(name, sub);
-      o.load(sub);
-    };
-    get("actor", *actor_);
-    get("actor_target", *actor_target_);
-    get("q1", *q1_);
-    get("q2", *q2_);
-    get("q1_target", *q1_target_);
-    get("q2_target", *q2_target_);
-    get_opt("actor_opt", *actor_opt_);
-    get_opt("critic_opt", *critic_opt_);
-    get_opt("alpha_opt", *alpha_opt_);
+      optimizer->load(sub);
+    }
     torch::Tensor log_alpha;
     archive.read("log_alpha", log_alpha);
-    {
-      torch::NoGradGuard no_grad;
-      log_alpha_.copy_(log_alpha);
-    }
-    updates_ = state.at("updates").get<int64_t>();
+    torch::NoGradGuard no_grad;
+    log_alpha_.copy_(log_alpha);
   } catch (const c10::Error& e) {
     throw core::Error(path.string() + ": unreadable off-policy agent (" +
                       e.what_without_backtrace() + ")");
-  } catch (const nlohmann::json::exception& e) {
-    throw core::Error(path.string() + ": unreadable off-policy agent state (" + e.what() + ")");
   }
+  updates_ = state.at("updates").get<int64_t>();
 }
 
 }  // namespace twinforge::learn

@@ -154,6 +154,9 @@ class OffPolicyAgent {
                                                  const torch::Tensor& base,
                                                  const torch::Tensor& eps) const;
   torch::Tensor Normal(int64_t rows, core::Rng& rng) const;
+  // The networks and optimizers by the names they are saved under.
+  std::vector<std::pair<const char*, torch::nn::Module*>> Modules();
+  std::vector<std::pair<const char*, torch::optim::Optimizer*>> Optimizers();
 
   int obs_dim_, action_dim_;
   OffPolicyOptions options_;
