@@ -141,7 +141,7 @@ void AddRun(CLI::App& parent, int& exit_code) {
 struct ResidualCli {
   RealityCli reality;
   std::string policy, task, out;
-  bool fresh = false;
+  bool fresh = false, scratch = false;
   pipeline::ResidualTrainOptions options;
 };
 
@@ -181,8 +181,11 @@ void AddTrainResidual(CLI::App& train, int& exit_code) {
       ->check(CLI::NonNegativeNumber);
   c->add_option("--level", o.level, "randomization level")->check(CLI::Range(0, 3));
   c->add_option("--seed", o.seed, "episode seeds");
+  c->add_flag("--scratch", cli->scratch,
+              "no residual: the agent acts alone on the same observations (a baseline)");
   c->add_flag("--fresh", cli->fresh, "discard an existing checkpoint");
   c->callback([cli, &exit_code] {
+    if (cli->scratch) cli->options.agent.residual = false;
     const sim::TaskSpec task = sim::LoadTaskSpec(cli->task);
     reality::RealityConnection connection(cli->reality.Options());
     core::Progress progress("residual", cli->options.episodes, "episodes");

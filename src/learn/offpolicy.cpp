@@ -119,6 +119,7 @@ void ReplayBuffer::Save(const std::filesystem::path& path) {
   for (const Field& f : Fields())
     archive.write(f.name, torch::from_blob(f.data->data(), {size_, f.width}).clone());
   archive.write("next", torch::tensor(next_, torch::kInt64));
+  archive.write("capacity", torch::tensor(capacity_, torch::kInt64));
   if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path());
   const auto tmp = path.string() + ".tmp";
   archive.save_to(tmp);
@@ -142,9 +143,16 @@ void ReplayBuffer::Load(const std::filesystem::path& path) {
                           "' does not fit a buffer of these sizes");
       read.push_back(x.contiguous());
     }
-    torch::Tensor next;
+    torch::Tensor next, capacity;
     archive.read("next", next);
-    size_ = read.front().size(0);
+    archive.read("capacity", capacity);
+    const int64_t saved_size = read.front().size(0);
+    // A buffer that wrapped keeps its rows in ring order: only the same capacity continues it.
+    if (saved_size == capacity.item<int64_t>() && capacity.item<int64_t>() != capacity_)
+      throw core::Error(path.string() + ": a full replay buffer of capacity " +
+                        std::to_string(capacity.item<int64_t>()) + " cannot continue as one of " +
+                        std::to_string(capacity_));
+    size_ = saved_size;
     next_ = next.item<int64_t>() % capacity_;
     const auto fields = Fields();
     for (std::size_t i = 0; i < fields.size(); ++i)
@@ -205,10 +213,12 @@ std::pair<torch::Tensor, torch::Tensor> OffPolicyAgent::Squash(const torch::Tens
     const torch::Tensor log_std = out.slice(1, action_dim_).clamp(-5.0, 2.0);
     u = eps.defined() ? mean + log_std.exp() * eps : mean;
     if (eps.defined()) {
-      // Gaussian log-likelihood of u, then the change of variables through scale * tanh.
+      // Gaussian log-likelihood of u, then the change of variables through tanh. The scale's
+      // constant Jacobian is left out, so that the entropy target (-dims) means the same for
+      // any residual_scale.
       const torch::Tensor t = torch::tanh(u);
       log_prob = ((-0.5 * eps * eps - log_std - 0.5 * std::log(2 * M_PI)) * mask_).sum(1) -
-                 (torch::log(scale * (1 - t * t) + 1e-6) * mask_).sum(1);
+                 (torch::log(1 - t * t + 1e-6) * mask_).sum(1);
     }
   }
   torch::Tensor action = scale * torch::tanh(u) * mask_;
@@ -264,8 +274,9 @@ OffPolicyStats OffPolicyAgent::Update(const ReplayBuffer& buffer, core::Rng& rng
       std::tie(next_action, next_log_prob) =
           Squash(actor_->forward(ActorInput(b.next_obs, b.next_base)), b.next_base, Normal(n, rng));
     } else {
-      const torch::Tensor noise =
-          (options_.target_noise * Normal(n, rng)).clamp(-options_.noise_clip, options_.noise_clip);
+      const torch::Tensor noise = (options_.target_noise * Normal(n, rng))
+                                      .clamp(-options_.noise_clip, options_.noise_clip) *
+                                  mask_;
       next_action =
           (Squash(actor_target_->forward(ActorInput(b.next_obs, b.next_base)), b.next_base, {})
                .first +
@@ -287,7 +298,14 @@ OffPolicyStats OffPolicyAgent::Update(const ReplayBuffer& buffer, core::Rng& rng
   stats.q = q1.mean().item<double>();
   ++updates_;
 
-  if (!train_actor || (!sac_ && updates_ % options_.policy_delay != 0)) return stats;
+  // Critics alone: their targets still follow them, or they would regress onto the random
+  // initial target networks for as long as the actor waits.
+  if (!train_actor) {
+    Polyak(q1_target_, q1_, options_.tau);
+    Polyak(q2_target_, q2_, options_.tau);
+    return stats;
+  }
+  if (!sac_ && updates_ % options_.policy_delay != 0) return stats;
 
   // Actor: up the first critic (TD3) or the soft value (SAC); the critics are held fixed.
   torch::Tensor action, log_prob;
@@ -354,6 +372,7 @@ void OffPolicyAgent::Save(const std::filesystem::path& path) {
   nlohmann::json state = {{"obs_dim", obs_dim_},
                           {"action_dim", action_dim_},
                           {"updates", updates_},
+                          {"info", info_},
                           {"options", core::ToJson(options_)}};
   archive.write("twinforge_offpolicy", c10::IValue(state.dump()));
   if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path());
@@ -433,6 +452,7 @@ void OffPolicyAgent::Load(const std::filesystem::path& path) {
                       e.what_without_backtrace() + ")");
   }
   updates_ = state.at("updates").get<int64_t>();
+  info_ = state.value("info", nlohmann::json::object());
 }
 
 }  // namespace twinforge::learn

@@ -4,7 +4,8 @@
 // SAM-RL's residual mode: the actor also sees a base policy's action and outputs a bounded delta,
 // action = clip(base + residual_scale * tanh(u), -1, 1), and the critics see the base action too.
 // The actor's last layer starts at zero, so an untrained residual leaves the base policy's
-// actions exactly unchanged; `Update(..., false)` trains the critics alone first.
+// actions exactly unchanged; `Update(..., false)` trains the critics alone first (their target
+// networks still follow them).
 //
 // All noise (exploration, TD3's target smoothing, SAC's reparameterization, minibatches) is drawn
 // from core::Rng generators the caller owns: a seed gives the same run on any thread count.
@@ -16,6 +17,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
@@ -33,7 +35,8 @@ struct OffPolicyOptions {
   // smoothed with clipped noise; exploration adds Gaussian noise of this standard deviation.
   int policy_delay = 2;
   double target_noise = 0.2, noise_clip = 0.5, exploration_noise = 0.1;
-  // SAC: the temperature starts here and is tuned toward an entropy of -action_dim.
+  // SAC: the temperature starts here and is tuned toward an entropy of -(corrected components),
+  // measured on tanh(u) before residual_scale.
   double initial_alpha = 0.1;
   bool learn_alpha = true;
   // Residual mode, the largest delta it may add (per component, in action units), and a penalty
@@ -143,6 +146,8 @@ class OffPolicyAgent {
   int obs_dim() const { return obs_dim_; }
   int action_dim() const { return action_dim_; }
   int64_t updates() const { return updates_; }
+  // Free-form facts saved with the agent (a residual's trainer records its base policy here).
+  nlohmann::json& info() { return info_; }
   const OffPolicyOptions& options() const { return options_; }
 
  private:
@@ -167,6 +172,7 @@ class OffPolicyAgent {
   torch::Tensor mask_;  // [action_dim]: 1 where the actor acts (residual_dims), else 0
   std::unique_ptr<torch::optim::Adam> actor_opt_, critic_opt_, alpha_opt_;
   int64_t updates_ = 0;
+  nlohmann::json info_ = nlohmann::json::object();
 };
 
 }  // namespace twinforge::learn

@@ -32,7 +32,8 @@ class PolicyOperator : public reality::Operator {
   void Begin(uint64_t seed);
 
   // A residual on the policy's actions (null: none). It reads the gripper latch from `client`
-  // (the one that sends the actions); with `explore` it adds its exploration noise.
+  // (the one that sends the actions); with `explore` it adds its exploration noise. An agent not
+  // in residual mode replaces the policy's action (a from-scratch baseline on the same inputs).
   void SetResidual(learn::OffPolicyAgent* residual, const reality::ActionClient* client,
                    bool explore);
 

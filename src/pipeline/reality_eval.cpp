@@ -78,6 +78,11 @@ RealityEvalReport EvaluateOnReality(reality::Robot& robot, const std::filesystem
   std::unique_ptr<learn::OffPolicyAgent> residual;
   if (!options.residual.empty()) {
     residual = learn::OffPolicyAgent::Open(options.residual);
+    const std::string trained_on = residual->info().value("base_policy_hash", "");
+    if (!trained_on.empty() && trained_on != header["policy_hash"])
+      throw core::Error(options.residual.string() + ": a residual trained on another policy (" +
+                        residual->info().value("base_policy", std::string("?")) + "), not " +
+                        policy.string());
     header["residual"] = options.residual.string();
     header["residual_hash"] = Fingerprint().AddFile(options.residual).Hex();
   }

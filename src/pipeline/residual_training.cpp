@@ -1,5 +1,8 @@
 #include "pipeline/residual_training.h"
 
+#include <algorithm>
+#include <charconv>
+#include <cstring>
 #include <fstream>
 #include <nlohmann/json.hpp>
 
@@ -17,6 +20,9 @@ namespace twinforge::pipeline {
 
 namespace {
 
+constexpr const char* kCurveHeader =
+    "episode,seed,success,steps,transitions,critic_loss,actor_loss,q,seconds";
+
 std::filesystem::path Beside(const std::filesystem::path& out, const std::string& suffix) {
   return out.string() + suffix;
 }
@@ -33,13 +39,20 @@ void FinishCommit(const std::filesystem::path& agent, const std::filesystem::pat
       std::filesystem::rename(Pending(p, episodes), p);
 }
 
-// Keeps the curve's header and its rows of episodes before `episodes`.
+// Keeps the curve's header and its whole rows of episodes before `episodes` (a killed run may
+// have left a row of an uncommitted episode, or half of one).
 void TrimCurve(const std::filesystem::path& csv, int episodes) {
   std::ifstream in(csv);
-  std::string text, line;
-  for (int row = 0; std::getline(in, line); ++row) {
-    if (row > 0 && (line.empty() || std::stoi(line) >= episodes)) break;
-    text += line + "\n";
+  std::string text = std::string(kCurveHeader) + "\n", line;
+  std::getline(in, line);  // the header, rewritten above
+  const auto fields = std::count(kCurveHeader, kCurveHeader + std::strlen(kCurveHeader), ',') + 1;
+  for (int n = 2; std::getline(in, line); ++n) {
+    if (std::count(line.begin(), line.end(), ',') + 1 != fields) continue;  // cut short
+    int episode = -1;
+    const auto [end, ec] = std::from_chars(line.data(), line.data() + line.size(), episode);
+    if (ec != std::errc() || *end != ',')
+      throw core::Error(csv.string() + " line " + std::to_string(n) + ": not a curve row: " + line);
+    if (episode < episodes) text += line + "\n";
   }
   core::WriteFileAtomic(csv, text);
 }
@@ -96,8 +109,7 @@ ResidualTrainReport TrainResidualOnReality(reality::Robot& robot,
                                            const std::filesystem::path& out, bool fresh,
                                            core::Progress* progress) {
   const auto start = core::Clock::now();
-  ResidualTrainOptions options = given;
-  options.agent.residual = true;
+  const ResidualTrainOptions& options = given;
   learn::PolicyNet net = LoadRobotPolicy(base_policy, task);
   const reality::RobotInfo info = robot.Info();
   if (!info.has_success_oracle)
@@ -110,17 +122,17 @@ ResidualTrainReport TrainResidualOnReality(reality::Robot& robot,
   const auto buffer_path = Beside(out, ".buffer"), state_path = Beside(out, ".state.json");
   const int obs_dim = PolicyOperator::ResidualObsDim(net);
   learn::OffPolicyAgent agent(obs_dim, sim::kContinuousActionDim, options.agent);
+  const std::string base_hash = Fingerprint().AddFile(base_policy).Hex();
   learn::ReplayBuffer buffer(obs_dim, sim::kContinuousActionDim,
                              int64_t(options.episodes) * task.horizon + 1);
   core::Rng update_rng(options.seed, 0x7e5d);
   // What a resumed run must share with the one it continues: all but the episode budget.
   nlohmann::json same_options = core::ToJson(options);
   same_options.erase("episodes");
-  const nlohmann::json fingerprint = {
-      {"base_policy_hash", Fingerprint().AddFile(base_policy).Hex()},
-      {"task", task.name},
-      {"robot", info.name},
-      {"options", same_options}};
+  const nlohmann::json fingerprint = {{"base_policy_hash", base_hash},
+                                      {"task", task.name},
+                                      {"robot", info.name},
+                                      {"options", same_options}};
 
   // Resume after the last whole episode, or start over.
   int first = 0;
@@ -150,12 +162,13 @@ ResidualTrainReport TrainResidualOnReality(reality::Robot& robot,
     spdlog::info("residual: resuming {} after episode {}", out.string(), first);
   } else {
     if (out.has_parent_path()) std::filesystem::create_directories(out.parent_path());
-    std::ofstream(report.curve_csv)
-        << "episode,seed,success,steps,transitions,critic_loss,actor_loss,q,seconds\n";
+    std::ofstream(report.curve_csv) << kCurveHeader << "\n";
   }
   std::ofstream curve(report.curve_csv, std::ios::app);
   if (!curve) throw core::IoError("cannot write " + report.curve_csv.string());
 
+  agent.info()["base_policy"] = base_policy.string();
+  agent.info()["base_policy_hash"] = base_hash;
   reality::ActionClient client(robot, task.control.limits);
   PolicyOperator op(robot, net, task, options.scene_points, options.arm_points, options.sample,
                     true);

@@ -1,7 +1,8 @@
 // SAM-RL's last step: a residual policy trained on reality (the proxy reality, or a robot whose
 // oracle tells success) on top of a point-cloud base policy. The residual starts at zero (the
 // robot first runs the base policy unchanged), its critics train alone over the first episodes,
-// then actor and critics together, with TD3 or SAC on the sparse success reward.
+// then actor and critics together, with TD3 or SAC on the sparse success reward. Without residual
+// mode the same loop trains TD3 or SAC from scratch on the same observations, as baselines.
 //
 // Episode e is reset with seed MixSeed(seed, e). After every episode the agent, its replay
 // buffer and the counters are saved beside `out`: a killed run resumes after the last whole
@@ -27,7 +28,8 @@ struct ResidualTrainOptions {
   int updates_per_step = 2;  // gradient steps per recorded step, taken after each episode
   int scene_points = 2048, arm_points = 512;
   bool sample = false;  // the base policy samples its moves (else the most likely)
-  // Residual mode is always on. By default it corrects the translation only, a fifth of a
+  // Residual mode (off: the agent acts alone, from scratch, on the same observations: the TD3 and
+  // SAC baselines). By default it corrects the translation only, a fifth of a
   // step at most, with 0.03-step exploration noise: on the drawer, 0.1-step noise on every
   // component (rotation drifting ~1 degree a step, a grip held a few percent open) took the
   // base policy from 44% to 2%, so nothing was left to learn from.

@@ -103,6 +103,11 @@ TEST(Residual, TrainsOnTheRobotAndResumesExactly) {
   ResidualTrainOptions two = o;
   two.episodes = 2;
   TrainResidualOnReality(robot, policy, task, two, dir / "split.pt", true);
+  // As if killed while committing episode 3 before its state was written: its curve row (cut
+  // short) and its pending files are there; the state still says 2.
+  std::ofstream(dir / "split.pt.curve.csv", std::ios::app) << "2,99,0,6,15,0.1\n2,9";
+  std::ofstream(dir / "split.pt.pending-3") << "not an agent";
+  std::ofstream(dir / "split.pt.buffer.pending-3") << "not a buffer";
   const ResidualTrainReport resumed =
       TrainResidualOnReality(robot, policy, task, o, dir / "split.pt", false);
   EXPECT_EQ(resumed.resumed_from, 2);
@@ -114,6 +119,31 @@ TEST(Residual, TrainsOnTheRobotAndResumesExactly) {
   EXPECT_TRUE(torch::equal(a->ActBatch(obs, base), b->ActBatch(obs, base)));
   EXPECT_FALSE(torch::equal(a->ActBatch(obs, base), base)) << "the actor never moved";
   EXPECT_EQ(a->updates(), b->updates());
+
+  // The trained residual belongs to its base policy: eval refuses it on another, by name.
+  RealityEvalOptions eval;
+  eval.levels = {1};
+  eval.trials = 1;
+  eval.scene_points = 256;
+  eval.arm_points = 64;
+  eval.residual = dir / "whole.pt";
+  std::filesystem::remove(dir / "eval.jsonl");
+  try {
+    EvaluateOnReality(robot, Policy(dir, 64, 6), task, eval, dir / "eval.jsonl");
+    FAIL() << "a residual ran on a policy it was not trained on";
+  } catch (const core::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("whole.pt"), std::string::npos) << e.what();
+  }
+
+  // Without residual mode the same loop trains an agent from scratch (the baseline): its
+  // actions are its own.
+  ResidualTrainOptions scratch = o;
+  scratch.episodes = 1;
+  scratch.agent.residual = false;
+  TrainResidualOnReality(robot, policy, task, scratch, dir / "scratch.pt", true);
+  auto alone = learn::OffPolicyAgent::Open(dir / "scratch.pt");
+  EXPECT_FALSE(alone->options().residual);
+  EXPECT_FALSE(torch::equal(alone->ActBatch(obs, base), base));
 
   // Another base policy's checkpoint is not continued.
   try {

@@ -41,7 +41,6 @@ SensingQReport FitSensingQ(SensingQNet& net, const std::vector<ViewReturn>& samp
   const int valid_n = int(options.validation * n);
   if (n - valid_n < 2)
     throw core::Error("sensing Q: too few samples to fit (" + std::to_string(n) + ")");
-  torch::manual_seed(options.seed);
   core::Rng rng(options.seed, 0x9e5);
   std::vector<int> order(n);
   std::iota(order.begin(), order.end(), 0);

@@ -56,7 +56,8 @@ struct SensingQReport {
   double valid_baseline = 0;  // predicting the mean training return on the held-out samples
 };
 
-// Fits `net` to the samples by mean squared error (Adam, minibatches drawn from options.seed).
+// Fits `net` to the samples by mean squared error (Adam, minibatches drawn from options.seed;
+// the net's initial weights are the caller's: seed LibTorch before constructing it).
 SensingQReport FitSensingQ(SensingQNet& net, const std::vector<ViewReturn>& samples,
                            const SensingQOptions& options = {});
 

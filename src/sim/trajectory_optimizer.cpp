@@ -149,7 +149,8 @@ double TrajectoryCostOf(const mjModel* m, const mjData* start, const TrajectoryC
   Trajectory tr;
   tr.controls = controls;
   const int horizon = int(controls.size()) / m->nu;
-  Rollout(m, start, cost, horizon, d.get(), tr);
+  if (!Rollout(m, start, cost, horizon, d.get(), tr))
+    throw core::NumericError("trajectory cost: the rollout diverged");
   return tr.cost;
 }
 
@@ -205,6 +206,7 @@ IlqrResult OptimizeTrajectory(const mjModel* m, const mjData* start, const Traje
     while (!accepted && mu <= options.max_regularization) {
       Eigen::VectorXd vx = models[horizon].lx;
       Eigen::MatrixXd vxx = models[horizon].lxx;
+      double dv1 = 0, dv2 = 0;  // predicted change: alpha * dv1 + alpha^2 * dv2
       bool ok = true;
       for (int t = horizon - 1; t >= 0 && ok; --t) {
         const CostModel& l = models[t];
@@ -221,6 +223,8 @@ IlqrResult OptimizeTrajectory(const mjModel* m, const mjData* start, const Traje
         }
         k[t] = -llt.solve(qu);
         K[t] = -llt.solve(qux);
+        dv1 += k[t].dot(qu);
+        dv2 += 0.5 * k[t].dot(quu * k[t]);
         vx = qx + K[t].transpose() * quu * k[t] + K[t].transpose() * qu + qux.transpose() * k[t];
         vxx = qxx + K[t].transpose() * quu * K[t] + K[t].transpose() * qux + qux.transpose() * K[t];
         vxx = 0.5 * (vxx + vxx.transpose());
@@ -232,14 +236,17 @@ IlqrResult OptimizeTrajectory(const mjModel* m, const mjData* start, const Traje
       // Forward pass: a backtracking line search on the feedforward step.
       for (double alpha = 1.0; alpha > 1e-3 && !accepted; alpha *= 0.5) {
         const Feedback feedback{&nominal, &k, &K, alpha};
+        const double predicted = -(alpha * dv1 + alpha * alpha * dv2);
         if (Rollout(m, start, cost, horizon, d.get(), candidate, &feedback) &&
+            nominal.cost - candidate.cost >
+                options.min_reduction_ratio * std::max(predicted, 0.0) &&
             candidate.cost < nominal.cost)
           accepted = true;
       }
       if (!accepted) mu *= 10;
     }
     if (!accepted) {
-      result.converged = true;  // no step lowers the cost at any regularization: a minimum
+      result.stalled = true;
       break;
     }
     mu = std::max(options.regularization, mu / 10);

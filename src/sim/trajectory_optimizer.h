@@ -60,13 +60,17 @@ struct IlqrOptions {
   double regularization = 1e-6;  // initial Levenberg-Marquardt term on Quu; grows on failure
   double max_regularization = 1e10;
   double tolerance = 1e-6;  // stop when the relative improvement falls below this
+  // A step is taken when it lowers the cost by at least this share of the decrease the
+  // quadratic model predicts for it (Armijo).
+  double min_reduction_ratio = 1e-4;
 };
 
 struct IlqrResult {
   std::vector<double> controls;  // horizon x nu, row per step
   std::vector<double> costs;     // the initial rollout's cost, then after each iteration
   int iterations = 0;
-  bool converged = false;
+  bool converged = false;  // the last step improved the cost by less than the tolerance
+  bool stalled = false;    // no step lowered the cost enough at any regularization
 };
 
 // Optimizes `horizon` controls (`initial` holds horizon x nu, or is empty for the model's
@@ -76,7 +80,8 @@ IlqrResult OptimizeTrajectory(const mjModel* m, const mjData* start, const Traje
                               int horizon, std::vector<double> initial,
                               const IlqrOptions& options = {});
 
-// Cost of applying `controls` from `start`: the rollout iLQR evaluates.
+// Cost of applying `controls` from `start`: the rollout iLQR evaluates. Throws
+// core::NumericError when the rollout diverges.
 double TrajectoryCostOf(const mjModel* m, const mjData* start, const TrajectoryCost& cost,
                         const std::vector<double>& controls);
 
