@@ -72,7 +72,8 @@ TEST_P(TwinFromScans, TheRebuiltTwinMeetsTheTargetsAndTheExpertStillSucceeds) {
 INSTANTIATE_TEST_SUITE_P(ProxyWorlds, TwinFromScans,
                          ::testing::Values(Case{"open_drawer", "prismatic"},
                                            Case{"open_cabinet", "revolute"},
-                                           Case{"mug_on_shelf", ""}, Case{"peg_insertion", ""}),
+                                           Case{"mug_on_shelf", ""}, Case{"peg_insertion", ""},
+                                           Case{"peg_insertion_occluded", ""}),
                          [](const auto& info) { return std::string(info.param.world); });
 
 }  // namespace
