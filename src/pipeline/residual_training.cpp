@@ -105,11 +105,10 @@ class EpisodeRecorder {
 ResidualTrainReport TrainResidualOnReality(reality::Robot& robot,
                                            const std::filesystem::path& base_policy,
                                            const sim::TaskSpec& task,
-                                           const ResidualTrainOptions& given,
+                                           const ResidualTrainOptions& options,
                                            const std::filesystem::path& out, bool fresh,
                                            core::Progress* progress) {
   const auto start = core::Clock::now();
-  const ResidualTrainOptions& options = given;
   learn::PolicyNet net = LoadRobotPolicy(base_policy, task);
   const reality::RobotInfo info = robot.Info();
   if (!info.has_success_oracle)
