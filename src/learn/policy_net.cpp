@@ -60,16 +60,22 @@ torch::Tensor PolicyNetImpl::Normalize(const torch::Tensor& proprio) const {
   return ((proprio - obs_mean) / obs_std).clamp(-kObsClip, kObsClip);
 }
 
+torch::Tensor PolicyNetImpl::Features(const torch::Tensor& points,
+                                      const torch::Tensor& normalized) {
+  return encoder_ ? torch::cat({encoder_->forward(points), normalized}, 1) : normalized;
+}
+
 torch::Tensor PolicyNetImpl::ForwardNormalized(const torch::Tensor& points,
                                                const torch::Tensor& normalized) {
-  torch::Tensor x = normalized;
-  if (encoder_) x = torch::cat({encoder_->forward(points), normalized}, 1);
-  return head_->forward(x);
+  return Head(Features(points, normalized));
 }
 
 torch::Tensor PolicyNetImpl::HeadInput(const torch::Tensor& points, const torch::Tensor& proprio) {
-  const torch::Tensor normalized = Normalize(proprio);
-  return encoder_ ? torch::cat({encoder_->forward(points), normalized}, 1) : normalized;
+  return Features(points, Normalize(proprio));
+}
+
+torch::Tensor PolicyNetImpl::Head(const torch::Tensor& head_input) {
+  return head_->forward(head_input);
 }
 
 int PolicyNetImpl::HeadInputDim() const {

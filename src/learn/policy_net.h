@@ -62,6 +62,8 @@ class PolicyNetImpl : public torch::nn::Module {
   // proprioception, [B, HeadInputDim()]. A residual policy reads it too.
   torch::Tensor HeadInput(const torch::Tensor& points, const torch::Tensor& proprio);
   int HeadInputDim() const;
+  // The head's output for a HeadInput: forward() without running the encoder again.
+  torch::Tensor Head(const torch::Tensor& head_input);
   // The head's output for an already normalized input.
   torch::Tensor ForwardNormalized(const torch::Tensor& points, const torch::Tensor& normalized);
   // Log-likelihood of `actions` (discrete: [B] indices; continuous: [B, action_dim]), per row.
@@ -72,6 +74,7 @@ class PolicyNetImpl : public torch::nn::Module {
   static constexpr double kObsClip = 10.0;
 
  private:
+  torch::Tensor Features(const torch::Tensor& points, const torch::Tensor& normalized);
   PolicyConfig config_;
   PointEncoder encoder_{nullptr};
   torch::nn::Sequential head_{nullptr};

@@ -69,9 +69,10 @@ reality::OperatorInput PolicyOperator::Next(const reality::Observation& o) {
                       sampling_, false, rng_, points_.data_ptr<float>());
   sim::MakeProprio(o.ee, 0.5 * o.gripper_width, 0.5 * o.gripper_width, proprio_.data_ptr<float>());
   in.kind = reality::OperatorInput::Kind::kAction;
-  in.action = learn::ChooseAction(net_, net_->forward(points_, proprio_), choose_, rng_);
-  if (!residual_) return in;
+  // The encoder runs once: the residual reads the same features the head does.
   const torch::Tensor features = net_->HeadInput(points_, proprio_).contiguous();
+  in.action = learn::ChooseAction(net_, net_->Head(features), choose_, rng_);
+  if (!residual_) return in;
   std::copy_n(features.data_ptr<float>(), obs_.size(), obs_.data());
   learn::ToUnitAction(in.action, limits_, client_->gripper(), base_.data());
   residual_->Act(obs_.data(), base_.data(), explore_, rng_, action_.data());
