@@ -194,6 +194,17 @@ def hole_block():
     return lathe(profile, 4, phase=math.pi / 4, closed=True)
 
 
+def pancake_half(top):
+    """One half of a round pancake, 8.8 cm across and 1.1 cm thick, its rim rounded off (two
+    halves so that the browned underside can be another colour from the top)."""
+    r, h, bevel = 0.044, 0.0055, 0.003
+    if top:
+        profile = [(0, 0), (r, 0), (r, h - bevel), (r - bevel, h), (0, h)]
+    else:
+        profile = [(0, -h), (r - bevel, -h), (r, -h + bevel), (r, 0), (0, 0)]
+    return outward(lathe(profile, 20))
+
+
 def signed_volume(m):
     total = 0.0
     for a, b, c in m.f:
@@ -224,3 +235,5 @@ if __name__ == "__main__":
     write("mug_on_shelf", "mug", mug())
     write("peg_insertion", "peg", peg())
     write("peg_insertion", "hole_block", hole_block())
+    write("spatula_flipping", "pancake_top", pancake_half(True))
+    write("spatula_flipping", "pancake_bottom", pancake_half(False))

@@ -85,10 +85,11 @@ core::Pose ScriptedExpert::Target(const Env& env, const ExpertStep& step) {
   const core::Pose ee = env.EePose();
   const bool first = steps_in_step_ == 0;
   core::Pose anchor = ids.site < 0 ? core::Pose::Identity() : YawFrame(env.SitePose(ids.site));
-  // An anchor on the carried object itself ("lift it 16 cm") is taken where the step starts,
-  // or the target would run ahead of the tool.
+  // An anchor on the carried object itself ("lift it 16 cm"), or on one the step moves, is
+  // taken where the step starts, or the target would run ahead of the tool.
   const mjModel* m = env.model();
-  if (ids.carry >= 0 && ids.site >= 0 && m->site_bodyid[ids.site] == m->site_bodyid[ids.carry]) {
+  if (step.freeze_anchor ||
+      (ids.carry >= 0 && ids.site >= 0 && m->site_bodyid[ids.site] == m->site_bodyid[ids.carry])) {
     if (first) frozen_anchor_ = anchor;
     anchor = frozen_anchor_;
   }

@@ -42,7 +42,7 @@ class ScriptedExpert {
   double drive_sign_ = 1.0;      // drive steps: direction of travel of the joint
   bool at_grid_target_ = false;  // discrete: no move brings the tool closer to the target
   int last_move_ = -1;           // discrete: the previous motion of this step
-  core::Pose frozen_anchor_;     // carry steps anchored on the carried object
+  core::Pose frozen_anchor_;     // steps anchored where they start (see freeze_anchor)
   core::Quat kept_rotation_;     // keep_orientation steps: the tool orientation at the start
 };
 

@@ -16,7 +16,8 @@ TEST_P(ExpertBar, SucceedsAtLeast95PercentAtLevel1) {
 
 INSTANTIATE_TEST_SUITE_P(Tasks, ExpertBar,
                          ::testing::Values("open_drawer", "open_cabinet", "mug_on_shelf",
-                                           "peg_insertion", "peg_insertion_occluded"));
+                                           "peg_insertion", "peg_insertion_occluded",
+                                           "spatula_flipping"));
 
 // At the limit of the 3 cm grid, turns and moves combined still close a sideways error of a
 // centimetre (the mug handle needs a few mm): applying the refining moves exactly, the tool

@@ -159,7 +159,10 @@ struct ExpertStep {
   // (an anchor on the held object itself is taken where the step starts).
   std::string carry;
   bool keep_orientation = false;  // move: hold the tool orientation the step starts with
-  double speed = 0;               // move, continuous actions: m per step at most (0 = limit)
+  // move: take the anchor where the step starts, not where it is now (an anchor on an object
+  // the step itself moves: the far edge of a pancake the blade is lifting).
+  bool freeze_anchor = false;
+  double speed = 0;  // move, continuous actions: m per step at most (0 = limit)
   GripCommand gripper = GripCommand::kKeep;
   std::string joint;                 // drive: the joint to move
   double to = 0.0;                   // drive: target joint value
@@ -184,6 +187,7 @@ struct ExpertStep {
     a("world_orientation", world_orientation);
     a("carry", carry);
     a("keep_orientation", keep_orientation);
+    a("freeze_anchor", freeze_anchor);
     a("speed", speed);
     a.Require(speed >= 0, "speed", "a non-negative step length in m");
     a.Enum("gripper", gripper,

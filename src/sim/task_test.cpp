@@ -51,7 +51,8 @@ TEST(Task, ADirectoryLoadsItsTaskFileAndDoesNotHideABuiltinTask) {
 
 TEST(Task, BuiltinTasksLoad) {
   const auto names = BuiltinTasks();
-  for (const char* expected : {"open_drawer", "open_cabinet", "mug_on_shelf", "peg_insertion"})
+  for (const char* expected : {"open_drawer", "open_cabinet", "mug_on_shelf", "peg_insertion",
+                               "peg_insertion_occluded", "spatula_flipping"})
     EXPECT_NE(std::find(names.begin(), names.end(), expected), names.end()) << expected;
   for (const auto& name : names) EXPECT_NO_THROW(Task(LoadTaskSpec(name))) << name;
 }
