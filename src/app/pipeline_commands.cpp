@@ -103,6 +103,11 @@ void AddRun(CLI::App& parent, int& exit_code) {
                 "options file (YAML/JSON; config.json of an earlier run); flags override it");
   c->add_option("--demos", o.demos, "real demos to record")->check(CLI::PositiveNumber);
   c->add_option("--rl-minutes", o.rl_minutes, "PPO + BC budget in minutes");
+  c->add_option("--sim-demos", o.sim_demos,
+                "sim demos for RL: policy (inverse distillation of the real-demo policy) or "
+                "expert (the twin's scripted operator, for tasks whose real-demo policy never "
+                "succeeds in the twin)")
+      ->check(CLI::IsMember({"policy", "expert"}));
   c->add_option("--levels", o.levels, "evaluation levels, e.g. 1,2,3")
       ->delimiter(',')
       ->check(CLI::Range(0, 3));
@@ -114,13 +119,14 @@ void AddRun(CLI::App& parent, int& exit_code) {
     if (!cli->config.empty()) {
       o = core::LoadConfig<pipeline::MainJobOptions>(cli->config);
       // Flags given on the command line win over the file.
-      for (const char* flag :
-           {"--task", "--demos", "--rl-minutes", "--levels", "--trials", "--threads", "--seed"})
+      for (const char* flag : {"--task", "--demos", "--rl-minutes", "--sim-demos", "--levels",
+                               "--trials", "--threads", "--seed"})
         if (c->count(flag)) {
           const std::string f = flag;
           if (f == "--task") o.task = cli->options.task;
           if (f == "--demos") o.demos = cli->options.demos;
           if (f == "--rl-minutes") o.rl_minutes = cli->options.rl_minutes;
+          if (f == "--sim-demos") o.sim_demos = cli->options.sim_demos;
           if (f == "--levels") o.levels = cli->options.levels;
           if (f == "--trials") o.trials = cli->options.trials;
           if (f == "--threads") o.threads = cli->options.threads;

@@ -1,5 +1,7 @@
 #include "learn/evaluate.h"
 
+#include <optional>
+
 #include "core/error.h"
 #include "core/log.h"
 #include "core/measure.h"
@@ -9,6 +11,7 @@
 #include "learn/rollout.h"
 #include "sim/camera.h"
 #include "sim/env.h"
+#include "sim/expert.h"
 
 namespace twinforge::learn {
 
@@ -17,6 +20,56 @@ namespace {
 bool Discrete(const sim::Task& task) {
   return task.spec().control.action == sim::ActionMode::kDiscrete;
 }
+
+// One episode's rows as they are taken (the layout `demos record` writes), trimmed to the steps
+// taken at the end. Clouds only when `scene_points` > 0.
+class EpisodeRecorder {
+ public:
+  EpisodeRecorder(core::Episode& rec, int horizon, int action_dim, int state_dim, int scene_points,
+                  int arm_points, nlohmann::json meta)
+      : rec_(rec) {
+    const auto rows = std::size_t(horizon);
+    rec.actions = core::FloatArray({rows, std::size_t(action_dim)});
+    rec.states = core::FloatArray({rows, std::size_t(state_dim)});
+    rec.obs["proprio"] = core::FloatArray({rows, std::size_t(sim::kProprioDim)});
+    if (scene_points > 0) {
+      rec.obs["scene_points"] = core::FloatArray({rows, std::size_t(3 * scene_points)});
+      rec.obs["arm_points"] = core::FloatArray({rows, std::size_t(3 * arm_points)});
+    }
+    rec.meta = std::move(meta);
+  }
+  // Row `t`: what was seen, and the action taken on it.
+  void Row(int t, const sim::Action& action, const std::vector<float>& state,
+           const std::vector<float>& proprio, const std::vector<float>* scene = nullptr,
+           const std::vector<float>* arm = nullptr) {
+    float* a = rec_.actions.row(t);
+    if (rec_.actions.row_size() == 1)
+      a[0] = float(action.index);
+    else
+      for (std::size_t k = 0; k < rec_.actions.row_size(); ++k) a[k] = float(action.value[k]);
+    std::copy(state.begin(), state.end(), rec_.states.row(t));
+    std::copy(proprio.begin(), proprio.end(), rec_.obs["proprio"].row(t));
+    if (scene) std::copy(scene->begin(), scene->end(), rec_.obs["scene_points"].row(t));
+    if (arm) std::copy(arm->begin(), arm->end(), rec_.obs["arm_points"].row(t));
+  }
+  void Outcome(const sim::StepResult& r) {
+    rec_.rewards.push_back(r.reward);
+    rec_.dones.push_back(r.success || r.done);
+  }
+  void Finish() {
+    const std::size_t taken = rec_.rewards.size();
+    const auto trim = [taken](core::FloatArray& a) {
+      a.data.resize(taken * a.row_size());
+      a.shape[0] = taken;
+    };
+    trim(rec_.actions);
+    trim(rec_.states);
+    for (auto& [key, value] : rec_.obs) trim(value);
+  }
+
+ private:
+  core::Episode& rec_;
+};
 
 }  // namespace
 
@@ -97,21 +150,12 @@ std::vector<PolicyEpisode> RunPolicyEpisodes(PolicyNet& net, std::shared_ptr<con
       env.Reset(seed, options.level);
       core::Rng cloud_rng(seed, 0xc1), sample_rng(seed, 0x5a), action_rng(seed, 0xac);
       PolicyEpisode& episode = episodes[j];
-      core::Episode& rec = episode.record;
-      if (record) {
-        rec.actions = core::FloatArray(
-            {std::size_t(horizon), discrete ? 1u : std::size_t(config.action_dim)});
-        rec.states = core::FloatArray({std::size_t(horizon), std::size_t(state_dim)});
-        rec.obs["proprio"] =
-            core::FloatArray({std::size_t(horizon), std::size_t(sim::kProprioDim)});
-        if (points) {
-          rec.obs["scene_points"] =
-              core::FloatArray({std::size_t(horizon), std::size_t(3 * options.scene_points)});
-          rec.obs["arm_points"] =
-              core::FloatArray({std::size_t(horizon), std::size_t(3 * options.arm_points)});
-        }
-        rec.meta = {{"seed", seed}, {"level", options.level}, {"episode", first + j}};
-      }
+      std::optional<EpisodeRecorder> recorder;
+      if (record)
+        recorder.emplace(
+            episode.record, horizon, discrete ? 1 : config.action_dim, state_dim,
+            points ? options.scene_points : 0, options.arm_points,
+            nlohmann::json{{"seed", seed}, {"level", options.level}, {"episode", first + j}});
       int t = 0;
       for (; t < horizon; ++t) {
         env.State(state.data());
@@ -124,41 +168,18 @@ std::vector<PolicyEpisode> RunPolicyEpisodes(PolicyNet& net, std::shared_ptr<con
         std::copy_n(points ? proprio.data() : state.data(), input_dim, input.data_ptr<float>());
         const torch::Tensor out = net->forward(point_input, input);
         const sim::Action action = ChooseAction(net, out, options, action_rng);
-        if (record) {
-          if (discrete)
-            rec.actions.row(t)[0] = float(action.index);
-          else
-            for (int k = 0; k < config.action_dim; ++k)
-              rec.actions.row(t)[k] = float(action.value[k]);
-          std::copy(state.begin(), state.end(), rec.states.row(t));
-          std::copy(proprio.begin(), proprio.end(), rec.obs["proprio"].row(t));
-          if (points) {
-            std::copy(scene.begin(), scene.end(), rec.obs["scene_points"].row(t));
-            std::copy(arm.begin(), arm.end(), rec.obs["arm_points"].row(t));
-          }
-        }
+        if (recorder)
+          recorder->Row(t, action, state, proprio, points ? &scene : nullptr,
+                        points ? &arm : nullptr);
         const sim::StepResult r = env.Step(action);
-        if (record) {
-          rec.rewards.push_back(r.reward);
-          rec.dones.push_back(r.success || r.done);
-        }
+        if (recorder) recorder->Outcome(r);
         if (r.success) {
           episode.steps = t + 1;
           break;
         }
         if (r.done) break;
       }
-      if (record) {
-        // Trim the rows to the steps taken.
-        const std::size_t taken = rec.rewards.size();
-        const auto trim = [taken](core::FloatArray& a) {
-          a.data.resize(taken * a.row_size());
-          a.shape[0] = taken;
-        };
-        trim(rec.actions);
-        trim(rec.states);
-        for (auto& [key, value] : rec.obs) trim(value);
-      }
+      if (recorder) recorder->Finish();
     }
   });
   return episodes;
@@ -226,6 +247,62 @@ InverseDistillReport InverseDistill(const std::filesystem::path& policy,
   spdlog::info("inverse distillation: {} of {} episodes succeeded ({:.0f}%), {} kept in {}",
                report.successes, report.attempts, 100 * report.success_rate(), report.successes,
                out.string());
+  return report;
+}
+
+InverseDistillReport ExpertDemos(std::shared_ptr<const sim::Task> task,
+                                 const InverseDistillOptions& options,
+                                 const std::filesystem::path& out, core::Progress* progress) {
+  const auto start = core::Clock::now();
+  if (options.successes <= 0 || options.rollout.episodes <= 0)
+    throw core::ConfigError("sim demos from the expert", "n",
+                            "positive numbers of demos and attempts");
+  const bool discrete = Discrete(*task);
+  core::DatasetWriter writer =
+      core::DatasetWriter::Create(out, {{"env_name", task->spec().name},
+                                        {"type", "twinforge"},
+                                        {"task", task->spec().name},
+                                        {"source", "sim:" + task->spec().scene},
+                                        {"policy", "scripted expert"},
+                                        {"action_mode", discrete ? "discrete" : "continuous"},
+                                        {"level", options.rollout.level}});
+  sim::Env env(task);
+  sim::ScriptedExpert expert(*task);
+  std::vector<float> state(env.state_dim()), proprio(sim::kProprioDim);
+  const int horizon = task->spec().horizon;
+  InverseDistillReport report;
+  for (int64_t e = 0; report.successes < options.successes && e < options.rollout.episodes; ++e) {
+    const uint64_t seed = core::MixSeed(options.rollout.seed, static_cast<uint64_t>(e));
+    env.Reset(seed, options.rollout.level);
+    expert.Reset();
+    core::Rng rng(seed, 0xe7);
+    core::Episode episode;
+    EpisodeRecorder recorder(episode, horizon, discrete ? 1 : sim::kContinuousActionDim,
+                             env.state_dim(), 0, 0,
+                             {{"seed", seed}, {"level", options.rollout.level}, {"episode", e}});
+    bool success = false;
+    for (int t = 0; t < horizon && !success; ++t) {
+      env.State(state.data());
+      env.Proprio(proprio.data());
+      // The action as the file stores it (float), so a demo replays exactly as it ran.
+      sim::Action action = expert.Act(env, rng);
+      for (double& v : action.value) v = static_cast<float>(v);
+      recorder.Row(t, action, state, proprio);
+      const sim::StepResult r = env.Step(action);
+      recorder.Outcome(r);
+      success = r.success;
+      if (r.done) break;
+    }
+    recorder.Finish();
+    ++report.attempts;
+    if (!success) continue;
+    writer.Add(episode, report.successes % 5 == 4 ? core::Split::kValid : core::Split::kTrain);
+    ++report.successes;
+    if (progress) progress->Set(report.successes, std::to_string(report.attempts) + " attempts");
+  }
+  report.seconds = core::SecondsSince(start);
+  spdlog::info("sim demos: the twin's scripted operator succeeded in {} of {} episodes, kept in {}",
+               report.successes, report.attempts, out.string());
   return report;
 }
 

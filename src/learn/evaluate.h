@@ -60,4 +60,13 @@ InverseDistillReport InverseDistill(const std::filesystem::path& policy,
                                     const std::filesystem::path& out,
                                     core::Progress* progress = nullptr);
 
+// Sim demos for RL when the real-demo policy never succeeds in the twin (RialTo's fallback: a
+// person demonstrates in the twin): the twin's scripted operator, which reads the twin's state,
+// runs `options.rollout.episodes` seeded episodes at most, and its first `options.successes`
+// successes are kept as InverseDistill keeps the policy's. Same file layout, without clouds.
+InverseDistillReport ExpertDemos(std::shared_ptr<const sim::Task> task,
+                                 const InverseDistillOptions& options,
+                                 const std::filesystem::path& out,
+                                 core::Progress* progress = nullptr);
+
 }  // namespace twinforge::learn

@@ -164,7 +164,7 @@ class Job {
             .Add(twin_hash)
             .AddFile(run_ / "policies/bc_real.pt")
             .Add(std::to_string(o_.inverse_demos) + "/" + std::to_string(o_.inverse_attempts) +
-                 "/" + std::to_string(o_.inverse_temperature))
+                 "/" + std::to_string(o_.inverse_temperature) + "/" + o_.sim_demos)
             .Hex(),
         {"demos/sim.hdf5"}, [&] {
           learn::InverseDistillOptions i;
@@ -174,19 +174,27 @@ class Job {
           i.rollout.temperature = o_.inverse_temperature;
           i.rollout.threads = o_.threads;
           i.rollout.seed = o_.seed;
-          core::Progress progress("inverse distillation", o_.inverse_demos, "demos");
+          const bool expert = o_.sim_demos == "expert";
+          core::Progress progress(expert ? "sim demos (scripted operator)" : "inverse distillation",
+                                  o_.inverse_demos, "demos");
           learn::InverseDistillReport r;
           WriteThenRename(run_ / "demos/sim.hdf5", [&](const std::filesystem::path& part) {
+            if (expert) {
+              r = learn::ExpertDemos(twin_task, i, part, &progress);
+              return;
+            }
             r = learn::InverseDistill(run_ / "policies/bc_real.pt", twin_task, i, part, &progress);
             if (r.successes == 0)
               spdlog::warn(
                   "inverse distillation: the real-demo policy succeeded in none of {} episodes in "
                   "the twin; the teacher trains by PPO alone, which rarely learns a sparse task "
-                  "(record more demos, or raise inverse_attempts)",
+                  "(record more demos, raise inverse_attempts, or take the sim demos from the "
+                  "twin's scripted operator: --sim-demos expert)",
                   r.attempts);
           });
           progress.Finish();
-          WriteJson(run_ / "demos/sim.json", {{"attempts", r.attempts},
+          WriteJson(run_ / "demos/sim.json", {{"source", o_.sim_demos},
+                                              {"attempts", r.attempts},
                                               {"successes", r.successes},
                                               {"success_rate", r.success_rate()},
                                               {"seconds", r.seconds}});

@@ -40,6 +40,10 @@ struct MainJobOptions {
   int inverse_demos = 12;  // sim demos to keep
   int inverse_attempts = 3000;
   double inverse_temperature = 0.5;
+  // Where the sim demos for RL come from: "policy", RialTo's inverse distillation of the
+  // real-demo policy; or "expert", the twin's scripted operator (a person demonstrating in the
+  // twin), for tasks whose real-demo policy never succeeds there.
+  std::string sim_demos = "policy";
   double rl_minutes = 20;  // PPO + BC budget (stops earlier at its target)
   double rl_target = 0.9;
   int rl_envs = 64;
@@ -61,6 +65,9 @@ struct MainJobOptions {
     a("inverse_demos", inverse_demos);
     a("inverse_attempts", inverse_attempts);
     a("inverse_temperature", inverse_temperature);
+    a("sim_demos", sim_demos);
+    a.Require(sim_demos == "policy" || sim_demos == "expert", "sim_demos",
+              "\"policy\" (inverse distillation) or \"expert\" (the twin's scripted operator)");
     a("rl_minutes", rl_minutes);
     a("rl_target", rl_target);
     a("rl_envs", rl_envs);
