@@ -57,15 +57,13 @@ std::vector<double> ParseNumbers(const char* text) {
 // the origin when the twin has no task), at rest.
 sim::ModelPtr CompileWithRobot(const std::filesystem::path& twin_dir) {
   sim::MjcfParts parts;
-  parts.scene = twin_dir / "scene.xml";
-  std::filesystem::path robot = sim::DefaultRobotPath();
+  sim::RobotSpec robot;
   if (std::filesystem::exists(twin_dir / "task.yaml")) {
-    const sim::TaskSpec task = sim::LoadTaskSpec((twin_dir / "task.yaml").string());
-    if (!task.robot.empty()) robot = twin_dir / task.robot;
-    parts.robot_mount.translation = Eigen::Vector3d(task.robot_position.data());
-    parts.robot_mount.rotation = core::Yaw(task.robot_yaw);
+    parts = sim::SceneWithRobot(sim::LoadTaskSpec((twin_dir / "task.yaml").string()), robot);
+  } else {  // a twin not yet written as a task: the default robot at the origin
+    parts.robot = sim::LoadRobotSpec(sim::DefaultRobotPath()).mjcf_path();
   }
-  parts.robot = sim::LoadRobotSpec(robot).mjcf_path();
+  parts.scene = twin_dir / "scene.xml";
   return sim::LoadModelFromText(sim::AssembleMjcf(parts), parts.scene.string());
 }
 

@@ -69,17 +69,22 @@ int Task::Id(mjtObj type, const std::string& name, const std::string& field) con
 
 Task::Task(TaskSpec spec) : Task(std::move(spec), ModelEdit{}) {}
 
-Task::Task(TaskSpec spec, const ModelEdit& edit) : spec_(std::move(spec)) {
-  const auto dir = spec_.file.parent_path();
-  robot_ = LoadRobotSpec(spec_.robot.empty() ? DefaultRobotPath() : dir / spec_.robot);
+MjcfParts SceneWithRobot(const TaskSpec& spec, RobotSpec& robot) {
+  const auto dir = spec.file.parent_path();
+  robot = LoadRobotSpec(spec.robot.empty() ? DefaultRobotPath() : dir / spec.robot);
   MjcfParts parts;
-  parts.robot = robot_.mjcf_path();
-  parts.robot_mount.translation = Eigen::Vector3d(spec_.robot_position.data());
-  parts.robot_mount.rotation = core::Yaw(spec_.robot_yaw);
-  parts.scene = dir / spec_.scene;
+  parts.robot = robot.mjcf_path();
+  parts.robot_mount.translation = Eigen::Vector3d(spec.robot_position.data());
+  parts.robot_mount.rotation = core::Yaw(spec.robot_yaw);
+  parts.scene = dir / spec.scene;
   if (!std::filesystem::exists(parts.scene))
-    throw core::ConfigError(spec_.file.string(), "scene",
+    throw core::ConfigError(spec.file.string(), "scene",
                             "file " + parts.scene.string() + " does not exist");
+  return parts;
+}
+
+Task::Task(TaskSpec spec, const ModelEdit& edit) : spec_(std::move(spec)) {
+  MjcfParts parts = SceneWithRobot(spec_, robot_);
   parts.extra_worldbody = DistractorBodies(spec_.randomization.distractors.max_count);
   parts.timestep = spec_.control.timestep;
   mjcf_ = AssembleMjcf(parts);

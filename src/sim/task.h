@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "sim/action.h"
+#include "sim/mjcf.h"
 #include "sim/model.h"
 #include "sim/robot.h"
 
@@ -505,6 +506,11 @@ struct TaskIndex {
   };
   std::vector<ExpertStepIds> expert_steps;  // per expert step
 };
+
+// What a task's model is assembled from: its scene, and its robot (returned in `robot`) on its
+// mount. Task adds the distractors and the timestep; the twin editor compiles just these.
+// Throws ConfigError naming the task file if the scene does not exist.
+MjcfParts SceneWithRobot(const TaskSpec& spec, RobotSpec& robot);
 
 // A task ready to simulate: its spec, robot, assembled nominal model and resolved names.
 // Immutable once built; environments copy the model and share the rest.
