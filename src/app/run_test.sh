@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The main job on the smoke budget (assets/runs/smoke.json): killed outright while training, then
 # run again. The finished stages are skipped, the killed one resumes, the rest run, the report and
-# both evaluations are written, and no proxy-reality server outlives its pipeline.
+# both evaluations are written, and no proxy-reality server outlives its pipeline. New sim demos
+# make the teacher start over.
 # usage: run_test.sh TWINFORGE_BINARY SOURCE_DIR
 set -euo pipefail
 tf=$1
@@ -40,4 +41,15 @@ grep -q "Success on reality" "$d/run/eval/report.html"
 # A third run has nothing left to do but the report.
 "$tf" run --config "$src/assets/runs/smoke.json" --out "$d/run" > /dev/null 2> "$d/third.log"
 [ "$(grep -c 'up to date' "$d/third.log")" -eq 10 ]
+# New sim demos (from the twin's scripted operator instead of inverse distillation): the teacher
+# starts over rather than resuming a checkpoint made from the old ones.
+"$tf" run --config "$src/assets/runs/smoke.json" --out "$d/run" --sim-demos expert > /dev/null \
+  2> "$d/fourth.log"
+grep -q '"source": "expert"' "$d/run/demos/sim.json" || { echo "sim demos not remade" >&2; exit 1; }
+grep -q "the teacher starts over" "$d/fourth.log" ||
+  { echo "rl did not start over" >&2; cat "$d/fourth.log" >&2; exit 1; }
+if grep -q "rl: resuming" "$d/fourth.log"; then
+  echo "rl resumed a checkpoint made from other sim demos" >&2
+  exit 1
+fi
 echo ALL-GOOD
