@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <sstream>
@@ -62,6 +63,37 @@ void WriteFileAtomic(const std::filesystem::path& path, const std::string& conte
     std::filesystem::remove(temp);
     throw IoError("cannot replace " + path.string() + ": " + ec.message());
   }
+}
+
+void Fingerprint::Mix(const void* data, std::size_t size) {
+  const auto* bytes = static_cast<const unsigned char*>(data);
+  for (std::size_t i = 0; i < size; ++i) {
+    state_ ^= bytes[i];
+    state_ *= 1099511628211ULL;
+  }
+}
+
+Fingerprint& Fingerprint::Add(const std::string& text) {
+  const uint64_t size = text.size();
+  Mix(&size, sizeof size);
+  Mix(text.data(), text.size());
+  return *this;
+}
+
+Fingerprint& Fingerprint::AddFile(const std::filesystem::path& path) {
+  Add(path.filename().string());
+  if (!std::filesystem::exists(path)) return Add("<missing>");
+  std::ifstream in(path, std::ios::binary);
+  char buffer[1 << 16];
+  while (in.read(buffer, sizeof buffer) || in.gcount() > 0)
+    Mix(buffer, static_cast<std::size_t>(in.gcount()));
+  return *this;
+}
+
+std::string Fingerprint::Hex() const {
+  char buffer[17];
+  std::snprintf(buffer, sizeof buffer, "%016llx", static_cast<unsigned long long>(state_));
+  return buffer;
 }
 
 }  // namespace twinforge::core

@@ -1,6 +1,7 @@
 // File helpers that fail loudly and never leave a half-written file behind.
 #pragma once
 
+#include <cstdint>
 #include <filesystem>
 #include <string>
 
@@ -17,5 +18,17 @@ void WriteFileAtomic(const std::filesystem::path& path, const std::string& conte
 
 // Creates `dir` (and parents) or throws IoError saying why.
 void EnsureDirectory(const std::filesystem::path& dir);
+
+// Fingerprint (FNV-1a, hex) of strings and of files' contents (missing files hash as such).
+class Fingerprint {
+ public:
+  Fingerprint& Add(const std::string& text);
+  Fingerprint& AddFile(const std::filesystem::path& path);
+  std::string Hex() const;
+
+ private:
+  void Mix(const void* data, std::size_t size);
+  uint64_t state_ = 1469598103934665603ULL;
+};
 
 }  // namespace twinforge::core

@@ -9,6 +9,7 @@
 #include "core/config.h"
 #include "core/dataset.h"
 #include "core/error.h"
+#include "core/fs.h"
 #include "core/log.h"
 #include "core/measure.h"
 #include "core/plot.h"
@@ -141,6 +142,8 @@ nlohmann::json Fingerprint(const PpoOptions& options, const sim::Task& task,
   j["task"] = task.spec().name;
   j["scene"] = task.spec().scene;
   j["demos"] = demos.empty() ? "" : std::filesystem::weakly_canonical(demos).string();
+  // What the file holds, too: demos remade under the same name are other demos.
+  j["demos_content"] = demos.empty() ? "" : core::Fingerprint().AddFile(demos).Hex();
   return j;
 }
 

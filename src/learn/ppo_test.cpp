@@ -86,7 +86,7 @@ void ExpectSameWeights(const std::filesystem::path& a, const std::filesystem::pa
 }
 
 // Sim demos for the BC loss, from an untrained sampled state policy on the tiny task.
-std::filesystem::path TinyDemos(const std::filesystem::path& dir) {
+std::filesystem::path TinyDemos(const std::filesystem::path& dir, int successes = 2) {
   auto task = testing::ReachTask();
   PolicyConfig config;
   config.point_features = 0;
@@ -98,10 +98,10 @@ std::filesystem::path TinyDemos(const std::filesystem::path& dir) {
   o.rollout.sample = true;
   o.rollout.episodes = 400;
   o.rollout.threads = 2;
-  o.successes = 2;
+  o.successes = successes;
   std::filesystem::remove(dir / "sim.hdf5");
   const InverseDistillReport r = InverseDistill(dir / "random.pt", task, o, dir / "sim.hdf5");
-  EXPECT_EQ(r.successes, 2);
+  EXPECT_EQ(r.successes, successes);
   return dir / "sim.hdf5";
 }
 
@@ -171,6 +171,26 @@ TEST(Ppo, ACheckpointOfOtherOptionsOrAJunkOneIsRefusedByName) {
       },
       core::Error);
   EXPECT_EQ(TrainPpo(task, "", dir / "t.pt", o, true).iterations, 2);
+}
+
+// Demos remade under the same file name are other demos: their checkpoint is not resumed.
+TEST(Ppo, ACheckpointOfOtherDemosUnderTheSameNameIsRefused) {
+  PinMathThreads(1);
+  auto task = testing::ReachTask();
+  const auto dir = core::testing::TestDir("ppo_test", "remade");
+  PpoOptions o = SmallOptions();
+  o.num_envs = 4;
+  o.epochs = 1;
+  o.max_iterations = 1;
+  TrainPpo(task, TinyDemos(dir), dir / "t.pt", o, true);
+  o.max_iterations = 2;
+  const auto remade = TinyDemos(dir, 3);
+  try {
+    TrainPpo(task, remade, dir / "t.pt", o);
+    FAIL() << "resumed a checkpoint made from other demos";
+  } catch (const core::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("demos_content"), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace

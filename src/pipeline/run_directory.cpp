@@ -72,35 +72,4 @@ void RunDirectory::Save() const {
   core::WriteFileAtomic(root_ / kManifest, core::Json{{"stages", stages}}.dump(2) + "\n");
 }
 
-void Fingerprint::Mix(const void* data, std::size_t size) {
-  const auto* bytes = static_cast<const unsigned char*>(data);
-  for (std::size_t i = 0; i < size; ++i) {
-    state_ ^= bytes[i];
-    state_ *= 1099511628211ULL;
-  }
-}
-
-Fingerprint& Fingerprint::Add(const std::string& text) {
-  const uint64_t size = text.size();
-  Mix(&size, sizeof size);
-  Mix(text.data(), text.size());
-  return *this;
-}
-
-Fingerprint& Fingerprint::AddFile(const std::filesystem::path& path) {
-  Add(path.filename().string());
-  if (!std::filesystem::exists(path)) return Add("<missing>");
-  std::ifstream in(path, std::ios::binary);
-  char buffer[1 << 16];
-  while (in.read(buffer, sizeof buffer) || in.gcount() > 0)
-    Mix(buffer, static_cast<std::size_t>(in.gcount()));
-  return *this;
-}
-
-std::string Fingerprint::Hex() const {
-  char buffer[17];
-  std::snprintf(buffer, sizeof buffer, "%016llx", static_cast<unsigned long long>(state_));
-  return buffer;
-}
-
 }  // namespace twinforge::pipeline

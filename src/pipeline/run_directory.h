@@ -13,6 +13,8 @@
 #include <string>
 #include <vector>
 
+#include "core/fs.h"
+
 namespace twinforge::pipeline {
 
 struct StageRecord {
@@ -43,16 +45,7 @@ class RunDirectory {
   std::map<std::string, StageRecord> stages_;
 };
 
-// Fingerprint (FNV-1a, hex) of strings and of files' contents (missing files hash as such).
-class Fingerprint {
- public:
-  Fingerprint& Add(const std::string& text);
-  Fingerprint& AddFile(const std::filesystem::path& path);
-  std::string Hex() const;
-
- private:
-  void Mix(const void* data, std::size_t size);
-  uint64_t state_ = 1469598103934665603ULL;
-};
+// Fingerprints of stage inputs (core/fs.h).
+using core::Fingerprint;
 
 }  // namespace twinforge::pipeline
