@@ -44,9 +44,9 @@ struct CameraFramesCli {
   RealityCli reality;
   std::string task = "open_drawer";
   std::string out;
-  int count = 6;
-  double spread = 0.12;
-  double height = 0.15;
+  int count = reality::kCameraFrames;
+  double spread = reality::kCameraFramesSpread;
+  double height = reality::kCameraFramesHeight;
   uint64_t seed = 1;
 };
 

@@ -20,7 +20,8 @@ struct BuildCli {
 };
 
 struct CalibrateCli {
-  std::string twin, frames, out, config;
+  std::string twin, frames, out, config, solver;
+  int steps = 0;
   real2sim::CalibrateOptions options;
 };
 
@@ -122,19 +123,23 @@ void AddTwinCommands(CLI::App& parent, int& exit_code) {
   calibrate->add_option("--out", calibrate_cli->out, "refined twin directory to write")->required();
   calibrate->add_option("--config", calibrate_cli->config, "calibration options (JSON/YAML)")
       ->check(CLI::ExistingFile);
-  calibrate->add_option("--iterations", calibrate_cli->options.iterations, "Adam steps")
+  calibrate
+      ->add_option("--solver", calibrate_cli->solver,
+                   "gauss_newton (depth residuals, the arm weighted) or adam (depth + EMD)")
+      ->check(CLI::IsMember({"gauss_newton", "adam"}));
+  calibrate
+      ->add_option("--iterations", calibrate_cli->steps,
+                   "at most this many steps (Gauss-Newton iterations or Adam steps)")
       ->check(CLI::PositiveNumber);
-  calibrate->callback([calibrate_cli, calibrate, &exit_code] {
+  calibrate->callback([calibrate_cli, &exit_code] {
     auto& o = *calibrate_cli;
-    if (!o.config.empty()) {
-      const int iterations = o.options.iterations;
-      o.options = core::LoadConfig<real2sim::CalibrateOptions>(o.config);
-      if (calibrate->count("--iterations")) o.options.iterations = iterations;
-    }
+    if (!o.config.empty()) o.options = core::LoadConfig<real2sim::CalibrateOptions>(o.config);
+    if (!o.solver.empty()) o.options.solver = o.solver;
+    if (o.steps > 0) o.options.Steps() = o.steps;
     const sim::TaskSpec twin_task =
         sim::LoadTaskSpec((o.twin / std::filesystem::path("task.yaml")).string());
     const core::Scan frames = core::ReadScan(o.frames);
-    core::Progress progress("calibrate", o.options.iterations, "steps");
+    core::Progress progress("calibrate", o.options.ProgressSteps(), "steps");
     const auto result = real2sim::CalibrateCamera(twin_task, frames, o.options, &progress);
     progress.Finish();
     real2sim::WriteCalibratedTwin(o.twin, frames, result, o.options, o.out);

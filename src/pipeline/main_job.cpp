@@ -72,10 +72,11 @@ class Job {
               const sim::Kinematics kinematics(
                   sim::LoadRobotSpec(reality::RobotDescriptionPath(robot.Info().robot)));
               core::Progress progress("camera frames", o_.camera_frames, "frames");
-              reality::CaptureCameraFrames(
-                  robot, kinematics,
-                  Eigen::Vector3d(task_.camera.look_at.data()) + Eigen::Vector3d(0, 0, 0.15),
-                  o_.camera_frames, 0.12, o_.seed, run_ / "camera", &progress);
+              reality::CaptureCameraFrames(robot, kinematics,
+                                           Eigen::Vector3d(task_.camera.look_at.data()) +
+                                               Eigen::Vector3d(0, 0, reality::kCameraFramesHeight),
+                                           o_.camera_frames, reality::kCameraFramesSpread, o_.seed,
+                                           run_ / "camera", &progress);
               progress.Finish();
             }
             if (articulated) Scan(run_ / "scan_open", true);
@@ -106,7 +107,7 @@ class Job {
                 .Hex(),
             {"calibrated/task.yaml", "calibrated/calibration/calibration.json"}, [&] {
               const core::Scan frames = core::ReadScan(run_ / "camera");
-              core::Progress progress("calibrate", o_.calibrate.iterations, "steps");
+              core::Progress progress("calibrate", o_.calibrate.ProgressSteps(), "steps");
               const auto c =
                   real2sim::CalibrateCamera(sim::LoadTaskSpec((run_ / "twin/task.yaml").string()),
                                             frames, o_.calibrate, &progress);
@@ -204,7 +205,8 @@ class Job {
         Fingerprint()
             .Add(twin_hash)
             .AddFile(run_ / "demos/sim.hdf5")
-            .Add(std::to_string(o_.rl_envs) + "/" + std::to_string(o_.seed))
+            .Add(std::to_string(o_.rl_envs) + "/" + std::to_string(o_.seed) + "/" +
+                 std::to_string(o_.rl_bc_coef))
             .Hex();
     Stage("rl",
           Fingerprint()
@@ -218,6 +220,7 @@ class Job {
             p.seed = o_.seed;
             p.max_seconds = 60 * o_.rl_minutes;
             p.target_success = o_.rl_target;
+            p.bc_coef = o_.rl_bc_coef;
             p.eval_episodes = o_.rl_eval_episodes;
             core::Progress progress("rl", 0, "iterations");
             const bool demos = ReadSuccesses(run_ / "demos/sim.json") > 0;

@@ -33,7 +33,8 @@ struct MainJobOptions {
   std::string reality;               // address (tcp://host:port or proxy:WORLD)
   std::string token;
   reality::ScanOptions scan;
-  int camera_frames = 6;  // of the fixed camera, to calibrate its pose (0: no calibration)
+  int camera_frames =
+      reality::kCameraFrames;  // of the fixed camera, to calibrate its pose (0: no calibration)
   real2sim::CalibrateOptions calibrate;
   int demos = 15;
   int bc_epochs = 300;     // at most (early stopping)
@@ -46,6 +47,7 @@ struct MainJobOptions {
   std::string sim_demos = "policy";
   double rl_minutes = 20;  // PPO + BC budget (stops earlier at its target)
   double rl_target = 0.9;
+  double rl_bc_coef = 0.1;  // weight of the BC loss on the sim demos (RialTo's 0.1)
   int rl_envs = 64;
   int rl_eval_episodes = 100;
   learn::DistillOptions distill;
@@ -70,6 +72,7 @@ struct MainJobOptions {
               "\"policy\" (inverse distillation) or \"expert\" (the twin's scripted operator)");
     a("rl_minutes", rl_minutes);
     a("rl_target", rl_target);
+    a("rl_bc_coef", rl_bc_coef);
     a("rl_envs", rl_envs);
     a("rl_eval_episodes", rl_eval_episodes);
     a("distill", distill);
@@ -80,6 +83,7 @@ struct MainJobOptions {
     a.Require(demos > 0 && inverse_demos > 0 && inverse_attempts > 0 && trials > 0, "demos",
               "positive demo, attempt and trial counts");
     a.Require(camera_frames >= 0, "camera_frames", "a non-negative frame count");
+    a.Require(rl_bc_coef >= 0, "rl_bc_coef", "a non-negative BC weight");
     a.Require(rl_envs > 0 && threads > 0, "threads", "positive env and thread counts");
   }
 };

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 
 #include "core/error.h"
 #include "core/fs.h"
@@ -45,6 +46,7 @@ struct RealFrame {
   torch::Tensor depth;  // [H, W] m, 0 = no return
   torch::Tensor rgb;    // [H, W, 3] in [0, 1]
   RasterMesh twin;      // the twin posed as the robot was
+  torch::Tensor arm;    // [V, 3] per twin vertex: 1 on the robot (known exactly), 0 elsewhere
   torch::Tensor rays;   // [H * W, 3] each pixel's (x/z, y/z, 1), for back-projecting depth
 };
 
@@ -76,6 +78,16 @@ RealFrame ReadFrame(const core::Scan& scan, size_t i, TwinGeometry& geometry) {
     }
   }
   frame.twin = geometry.Posed(info.joint_positions, info.gripper_width);
+  const mjModel* m = geometry.model();
+  const int mount = m ? mj_name2id(m, mjOBJ_BODY, "robot_mount") : -1;
+  frame.arm = geometry
+                  .Posed(info.joint_positions, info.gripper_width,
+                         [&](int g) {
+                           for (int b = m->geom_bodyid[g]; b > 0; b = m->body_parentid[b])
+                             if (b == mount) return Eigen::Vector3d::Ones().eval();
+                           return Eigen::Vector3d::Zero().eval();
+                         })
+                  .colors;
   frame.rays = Rays(info.intrinsics).reshape({-1, 3});
   return frame;
 }
@@ -146,45 +158,124 @@ core::Pose IcpCorrection(const std::vector<RealFrame>& frames, double outlier) {
   return frames.front().reported.Inverse() * moved * frames.front().reported;
 }
 
-nlohmann::json ToJson(const core::Pose& p) {
-  const Eigen::Vector3d r = core::LogMap(p.rotation);
-  return {{"translation_mm",
-           {p.translation.x() * 1e3, p.translation.y() * 1e3, p.translation.z() * 1e3}},
-          {"rotation_deg", {r.x() * 180 / M_PI, r.y() * 180 / M_PI, r.z() * 180 / M_PI}},
-          {"distance_mm", p.translation.norm() * 1e3},
-          {"angle_deg", r.norm() * 180 / M_PI}};
+using Vector6 = Eigen::Matrix<double, 6, 1>;
+
+torch::Tensor ToTensor6(const Vector6& v) {
+  return torch::from_blob(const_cast<double*>(v.data()), {6}, kDouble).clone();
 }
 
-nlohmann::json ToJson(const std::vector<FrameFit>& fits) {
-  nlohmann::json out = nlohmann::json::array();
-  for (const FrameFit& f : fits)
-    out.push_back({{"median_depth_error_mm", f.median_depth_error * 1e3}, {"inliers", f.inliers}});
-  return out;
+SoftImage RenderAt(const RealFrame& f, const Vector6& delta, const SoftRasterOptions& raster) {
+  return SoftRasterize(f.twin, f.intrinsics, PerturbPose(f.reported, ToTensor6(delta)), raster);
 }
 
-}  // namespace
-
-CameraCalibration CalibrateCamera(const sim::TaskSpec& twin_task, const core::Scan& scan,
-                                  const CalibrateOptions& options, core::Progress* progress) {
-  if (scan.frames.empty())
-    throw core::ConfigError((scan.dir / "frames.json").string(), "frames", "at least one frame");
-  const auto start = std::chrono::steady_clock::now();
-  TwinGeometry geometry(twin_task, options.mesh_triangles);
-  std::vector<RealFrame> frames;
-  for (size_t i = 0; i < scan.frames.size(); ++i) frames.push_back(ReadFrame(scan, i, geometry));
-
-  CameraCalibration out;
-  for (const RealFrame& f : frames) {
-    out.before.push_back(Fit(f, f.reported, options.outlier));
-    if (out.before.back().inliers < 0.05)
-      throw core::ConfigError(
-          (scan.dir / scan.frames[out.before.size() - 1].depth).string(), "depth",
-          "a frame that shows the twin's scene (under 5% of its returns are "
-          "within " +
-              std::to_string(options.outlier) + " m of the twin seen from the reported pose)");
+// Levenberg-Marquardt on the frames' depth residuals: the objective is the mean Huber depth
+// error of DepthLoss (pixels the twin does not cover, or misses by more than `outlier`, cost a
+// constant), the arm's pixels weighted arm_weight times (its shape and pose are known exactly,
+// the scene's only as well as its scan), plus the prior; minimised by iteratively reweighted
+// Gauss-Newton steps, damped until a step lowers it. Each pixel's derivative is a central
+// difference of sharp renders; pixels where a difference jumps (an edge crossed the pixel) are
+// left out of that step. Unlike Adam's steps of a fixed size, a step here is as long as the data
+// say, and it stops where no step lowers the loss instead of drifting along a direction the
+// frames hardly see.
+Vector6 GaussNewton(const std::vector<RealFrame>& frames, const CalibrateOptions& o,
+                    const Vector6& start, double* final_cost, std::vector<double>* curve,
+                    core::Progress* progress) {
+  torch::NoGradGuard no_grad;
+  SoftRasterOptions raster;
+  raster.sigma = o.gauss_newton_sigma;
+  raster.cutoff = 3;
+  const double huber = 0.005;  // m: quadratic below, linear above
+  const double step = 1e-5;    // rad and m, for the central differences
+  const double jump = 30;      // m per rad (or per m): a depth that moves faster crossed an edge
+  // The prior as in the Adam objective: a move of prior_* costs as much as 1 mm mean error.
+  const double millimetre = 0.5e-6;
+  Vector6 prior;
+  prior << Eigen::Vector3d::Constant(2 * millimetre / (o.prior_rotation * o.prior_rotation)),
+      Eigen::Vector3d::Constant(2 * millimetre / (o.prior_translation * o.prior_translation));
+  // The twin rendered with the arm's share of each pixel as its colour, and that share as weight.
+  auto render = [&](const RealFrame& f, const Vector6& delta, torch::Tensor* weight) {
+    SoftImage image = SoftRasterize({f.twin.vertices, f.twin.faces, f.arm}, f.intrinsics,
+                                    PerturbPose(f.reported, ToTensor6(delta)), raster);
+    *weight = 1 + (o.arm_weight - 1) * image.rgb.select(2, 0);
+    return image;
+  };
+  auto cost = [&](const Vector6& delta) {
+    double sum = 0;
+    for (const RealFrame& f : frames) {
+      torch::Tensor weight;
+      const SoftImage image = render(f, delta, &weight);
+      sum += DepthLoss(image.depth, image.silhouette, f.depth, huber, o.outlier, weight)
+                 .item<double>();
+    }
+    return sum / frames.size() + 0.5 * delta.dot(prior.asDiagonal() * delta);
+  };
+  Vector6 delta = start;
+  double current = cost(delta);
+  double damping = 1e-3;
+  for (int iteration = 0; iteration < o.gauss_newton_iterations; ++iteration) {
+    Eigen::Matrix<double, 6, 6> h = Eigen::Matrix<double, 6, 6>::Zero();
+    Vector6 g = Vector6::Zero();
+    for (const RealFrame& f : frames) {
+      torch::Tensor weight;
+      const SoftImage image = render(f, delta, &weight);
+      const auto residual = image.depth - f.depth;
+      auto use = (f.depth > 0) & (image.silhouette > 0.99) & (residual.abs() < o.outlier);
+      std::vector<torch::Tensor> columns;
+      for (int k = 0; k < 6; ++k) {
+        Vector6 plus = delta, minus = delta;
+        plus[k] += step;
+        minus[k] -= step;
+        const SoftImage a = RenderAt(f, plus, raster), b = RenderAt(f, minus, raster);
+        const auto column = (a.depth - b.depth) / (2 * step);
+        use = use & (a.silhouette > 0.99) & (b.silhouette > 0.99) & (column.abs() < jump);
+        columns.push_back(column);
+      }
+      const double returns = std::max<int64_t>(1, (f.depth > 0).sum().item<int64_t>());
+      const auto r = residual.masked_select(use);
+      if (r.size(0) == 0) continue;
+      const auto pixel_weight = weight.masked_select(use);
+      const auto jacobian =
+          torch::stack({columns[0].masked_select(use), columns[1].masked_select(use),
+                        columns[2].masked_select(use), columns[3].masked_select(use),
+                        columns[4].masked_select(use), columns[5].masked_select(use)},
+                       1);
+      // Huber as reweighted least squares: w = 1 inside the width, width / |r| beyond.
+      const auto w = (huber / r.abs()).clamp_max(1) * pixel_weight / (returns * frames.size());
+      const auto jt_w = (jacobian * w.unsqueeze(1)).t().contiguous();
+      const auto hh = torch::matmul(jt_w, jacobian).contiguous();
+      const auto gg = torch::matmul(jt_w, r).contiguous();
+      h += Eigen::Map<const Eigen::Matrix<double, 6, 6, Eigen::RowMajor>>(hh.data_ptr<double>());
+      g += Eigen::Map<const Vector6>(gg.data_ptr<double>());
+    }
+    g += prior.asDiagonal() * delta;
+    h += prior.asDiagonal();
+    bool moved = false;
+    for (int attempt = 0; attempt < 8 && !moved; ++attempt) {
+      Eigen::Matrix<double, 6, 6> a = h;
+      a.diagonal() *= 1 + damping;
+      const Vector6 next = delta - a.ldlt().solve(g);
+      const double c = cost(next);
+      if (c < current) {
+        moved = (next - delta).cwiseAbs().maxCoeff() > 1e-7;
+        delta = next;
+        current = c;
+        damping = std::max(1e-6, damping / 3);
+        if (!moved) break;
+      } else {
+        damping *= 4;
+      }
+    }
+    curve->push_back(current);
+    if (progress) progress->Advance(1, "loss " + std::to_string(current));
+    if (!moved) break;
   }
+  *final_cost = current;
+  return delta;
+}
 
-  // Adam on the correction, coarse to fine.
+// Adam on the correction, coarse to fine, on the depth and EMD losses (and the colour loss).
+core::Pose AdamCorrection(const std::vector<RealFrame>& frames, const CalibrateOptions& options,
+                          std::vector<double>* curve, core::Progress* progress) {
   core::Rng rng(options.seed, 0xca1b);
   auto delta = torch::zeros({6}, kDouble).requires_grad_(true);
   torch::optim::Adam adam({delta}, torch::optim::AdamOptions(options.learning_rate));
@@ -229,11 +320,73 @@ CameraCalibration CalibrateCamera(const sim::TaskSpec& twin_task, const core::Sc
     adam.zero_grad();
     loss.backward();
     adam.step();
-    out.loss.push_back(loss.item<double>());
-    if (progress) progress->Advance(1, "loss " + std::to_string(out.loss.back()));
+    curve->push_back(loss.item<double>());
+    if (progress) progress->Advance(1, "loss " + std::to_string(curve->back()));
   }
-  out.correction = ApplyDelta(core::Pose::Identity(), delta);
+  return ApplyDelta(core::Pose::Identity(), delta);
+}
+
+nlohmann::json ToJson(const core::Pose& p) {
+  const Eigen::Vector3d r = core::LogMap(p.rotation);
+  return {{"translation_mm",
+           {p.translation.x() * 1e3, p.translation.y() * 1e3, p.translation.z() * 1e3}},
+          {"rotation_deg", {r.x() * 180 / M_PI, r.y() * 180 / M_PI, r.z() * 180 / M_PI}},
+          {"distance_mm", p.translation.norm() * 1e3},
+          {"angle_deg", r.norm() * 180 / M_PI}};
+}
+
+nlohmann::json ToJson(const std::vector<FrameFit>& fits) {
+  nlohmann::json out = nlohmann::json::array();
+  for (const FrameFit& f : fits)
+    out.push_back({{"median_depth_error_mm", f.median_depth_error * 1e3}, {"inliers", f.inliers}});
+  return out;
+}
+
+}  // namespace
+
+CameraCalibration CalibrateCamera(const sim::TaskSpec& twin_task, const core::Scan& scan,
+                                  const CalibrateOptions& options, core::Progress* progress) {
+  if (scan.frames.empty())
+    throw core::ConfigError((scan.dir / "frames.json").string(), "frames", "at least one frame");
+  const auto start = std::chrono::steady_clock::now();
+  TwinGeometry geometry(twin_task, options.mesh_triangles);
+  std::vector<RealFrame> frames;
+  for (size_t i = 0; i < scan.frames.size(); ++i) frames.push_back(ReadFrame(scan, i, geometry));
+
+  CameraCalibration out;
+  for (const RealFrame& f : frames) {
+    out.before.push_back(Fit(f, f.reported, options.outlier));
+    if (out.before.back().inliers < 0.05)
+      throw core::ConfigError(
+          (scan.dir / scan.frames[out.before.size() - 1].depth).string(), "depth",
+          "a frame that shows the twin's scene (under 5% of its returns are "
+          "within " +
+              std::to_string(options.outlier) + " m of the twin seen from the reported pose)");
+  }
+
   out.icp_correction = IcpCorrection(frames, options.outlier);
+  if (options.solver == "gauss_newton") {
+    // From the reported pose and from ICP's answer; the lower loss wins. Each run stops in the
+    // nearest minimum, and the two starts fall into different ones as often as not.
+    std::vector<Vector6> starts(1, Vector6::Zero());
+    if (options.start_from_icp) {
+      starts.emplace_back();
+      starts.back() << core::LogMap(out.icp_correction.rotation), out.icp_correction.translation;
+    }
+    double best = std::numeric_limits<double>::infinity();
+    for (const Vector6& start : starts) {
+      double loss = 0;
+      std::vector<double> curve;
+      const Vector6 delta = GaussNewton(frames, options, start, &loss, &curve, progress);
+      if (loss < best) {
+        best = loss;
+        out.correction = ApplyDelta(core::Pose::Identity(), ToTensor6(delta));
+        out.loss = curve;
+      }
+    }
+  } else {
+    out.correction = AdamCorrection(frames, options, &out.loss, progress);
+  }
   for (const RealFrame& f : frames) {
     out.after.push_back(Fit(f, f.reported * out.correction, options.outlier));
     out.icp.push_back(Fit(f, f.reported * out.icp_correction, options.outlier));
@@ -262,6 +415,7 @@ nlohmann::json ToJson(const CameraCalibration& c) {
           {"frames_icp", ToJson(c.icp)},
           {"loss_first", c.loss.empty() ? 0.0 : c.loss.front()},
           {"loss_last", c.loss.empty() ? 0.0 : c.loss.back()},
+          {"steps", c.loss.size()},
           {"seconds", c.seconds}};
 }
 

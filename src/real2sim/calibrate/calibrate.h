@@ -4,10 +4,13 @@
 // bumped). Given a few frames of that camera (RGB-D, the robot's joints when each was taken, the
 // extrinsics the robot reports), the twin is rendered from the reported pose with the
 // differentiable renderer (soft_render.h): the scene's visible geoms and the arm posed at each
-// frame's joints. A correction of the pose, in the camera's own frame, is followed down the
-// gradient of the depth error and of the EMD between the real and the rendered clouds, coarse to
-// fine. Without the robot the same frames also give Open3D's point-to-plane ICP, reported side by
-// side as the baseline.
+// frame's joints. A correction of the pose, in the camera's own frame, is found by damped
+// Gauss-Newton (Levenberg-Marquardt) on the depth residuals, the arm's pixels weighted above the
+// scene's: the arm's shape and joints are known exactly, the scene only as well as its scan. (The
+// first solver, still an option, followed the gradient of the depth error and of the EMD between
+// the real and rendered clouds with Adam; its fixed-size steps drifted along directions the frames
+// hardly see.) The same frames also give Open3D's point-to-plane ICP, reported side by side as
+// the baseline.
 //
 // The refined twin is a copy of the twin whose task.yaml camera carries the correction
 // (CameraSpec::correction): the sim then renders where the real camera is, and real frames are
@@ -27,7 +30,14 @@
 namespace twinforge::real2sim {
 
 struct CalibrateOptions {
-  int iterations = 150;                     // Adam steps in all
+  // "gauss_newton": Levenberg-Marquardt on the depth residuals (Jacobians by differences of
+  // renders); "adam": gradient steps on depth + EMD (+ colour) through the soft renderer.
+  std::string solver = "gauss_newton";
+  int gauss_newton_iterations = 30;  // at most (it stops when a step no longer lowers the loss)
+  double gauss_newton_sigma = 0.3;   // px, the renders' soft edge
+  double arm_weight = 10;            // x the weight of a scene pixel, for the arm's pixels
+  bool start_from_icp = true;        // a second run from ICP's answer; the lower loss wins
+  int iterations = 150;              // Adam steps in all (solver "adam")
   std::vector<double> sigmas = {1.0, 0.5};  // px, the soft edge, coarse to fine
   double learning_rate = 0.003;             // rad and m per step (Adam)
   double depth_weight = 100;                // x mean Huber depth error (m)
@@ -41,8 +51,20 @@ struct CalibrateOptions {
   double outlier = 0.08;     // m: depth differences beyond this are ignored
   int mesh_triangles = 600;  // each geom is decimated to this many triangles to render
   uint64_t seed = 1;
+  // The step budget of the chosen solver.
+  int& Steps() { return solver == "adam" ? iterations : gauss_newton_iterations; }
+  int Steps() const { return solver == "adam" ? iterations : gauss_newton_iterations; }
+  // What a progress bar counts to (Gauss-Newton: per start).
+  int ProgressSteps() const {
+    return solver == "adam" ? iterations : (start_from_icp ? 2 : 1) * gauss_newton_iterations;
+  }
   template <class A>
   void Serialize(A& a) {
+    a("solver", solver);
+    a("gauss_newton_iterations", gauss_newton_iterations);
+    a("gauss_newton_sigma", gauss_newton_sigma);
+    a("arm_weight", arm_weight);
+    a("start_from_icp", start_from_icp);
     a("iterations", iterations);
     a("sigmas", sigmas);
     a("learning_rate", learning_rate);
@@ -55,7 +77,10 @@ struct CalibrateOptions {
     a("outlier", outlier);
     a("mesh_triangles", mesh_triangles);
     a("seed", seed);
-    a.Require(iterations >= 1, "iterations", "at least one step");
+    a.Require(solver == "gauss_newton" || solver == "adam", "solver",
+              "\"gauss_newton\" or \"adam\"");
+    a.Require(gauss_newton_iterations >= 1 && iterations >= 1, "iterations", "at least one step");
+    a.Require(gauss_newton_sigma > 0, "gauss_newton_sigma", "a positive width in px");
     a.Require(!sigmas.empty(), "sigmas", "at least one edge width");
     for (double s : sigmas) a.Require(s > 0, "sigmas", "positive widths in px");
     a.Require(learning_rate > 0, "learning_rate", "a positive step");

@@ -12,7 +12,8 @@ torch::Tensor RgbLoss(const torch::Tensor& rgb, const torch::Tensor& silhouette,
 }
 
 torch::Tensor DepthLoss(const torch::Tensor& depth, const torch::Tensor& silhouette,
-                        const torch::Tensor& target, double delta, double outlier) {
+                        const torch::Tensor& target, double delta, double outlier,
+                        const torch::Tensor& weight) {
   const auto returns = target > 0;
   const auto inlier =
       (returns & (silhouette.detach() > 0.5) & ((depth - target).detach().abs() < outlier))
@@ -20,8 +21,9 @@ torch::Tensor DepthLoss(const torch::Tensor& depth, const torch::Tensor& silhoue
   const auto huber = torch::huber_loss(depth * inlier, target * inlier, at::Reduction::None, delta);
   // What an outlier costs: the Huber loss at the outlier distance.
   const double cap = delta * (outlier - 0.5 * delta);
-  const auto outliers = returns.to(torch::kFloat64).sum() - inlier.sum();
-  return (huber.sum() + cap * outliers) / (returns.sum() + 1e-9);
+  const auto outliers = returns.to(torch::kFloat64) - inlier;
+  const auto per_pixel = huber + cap * outliers;
+  return (weight.defined() ? per_pixel * weight : per_pixel).sum() / (returns.sum() + 1e-9);
 }
 
 torch::Tensor SilhouetteLoss(const torch::Tensor& silhouette, const torch::Tensor& target) {

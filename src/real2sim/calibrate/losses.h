@@ -16,9 +16,11 @@ torch::Tensor RgbLoss(const torch::Tensor& rgb, const torch::Tensor& silhouette,
 // Mean Huber depth error (m, Huber width `delta`) over the pixels where the target has a return.
 // A pixel the rendering does not cover (silhouette <= 0.5) or misses by more than `outlier` (a
 // person, a cable: something the twin does not have) costs what `outlier` would, without a
-// gradient: a pose cannot lower the loss by pushing what disagrees out of view.
+// gradient: a pose cannot lower the loss by pushing what disagrees out of view. `weight` ([H, W],
+// optional) scales each pixel's term.
 torch::Tensor DepthLoss(const torch::Tensor& depth, const torch::Tensor& silhouette,
-                        const torch::Tensor& target, double delta = 0.01, double outlier = 0.05);
+                        const torch::Tensor& target, double delta = 0.01, double outlier = 0.05,
+                        const torch::Tensor& weight = {});
 
 // 1 - soft intersection over union of a rendered silhouette and a target mask ([H, W] in [0, 1]).
 torch::Tensor SilhouetteLoss(const torch::Tensor& silhouette, const torch::Tensor& target);
