@@ -201,8 +201,9 @@ void AddRl(CLI::App& train, int& exit_code) {
     if (!demos.empty() && !std::filesystem::exists(demos))
       throw core::IoError("--demos: no file " + demos + " (use --demos none for PPO from scratch)");
     core::Progress progress("rl", cli->options.max_iterations, "iterations");
-    const learn::PpoReport r =
-        learn::TrainPpo(task, demos, cli->out, cli->options, cli->fresh, &progress);
+    const learn::PpoReport r = learn::TrainPpo(
+        task, demos, cli->out, cli->options,
+        cli->fresh ? learn::CheckpointMode::kStartOver : learn::CheckpointMode::kResume, &progress);
     progress.Finish();
     const nlohmann::json report = {{"policy", cli->out},
                                    {"task", task->spec().name},

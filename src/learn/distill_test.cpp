@@ -207,7 +207,7 @@ TEST(Distill, TheStudentLearnsTheTeachersTask) {
   p.max_seconds = 0;
   p.max_iterations = 25;
   p.target_success = 0.8;
-  const PpoReport teacher = TrainPpo(task, "", dir / "teacher.pt", p, true);
+  const PpoReport teacher = TrainPpo(task, "", dir / "teacher.pt", p, CheckpointMode::kStartOver);
   ASSERT_GE(teacher.best_eval_success, 0.6);
 
   DistillOptions o;

@@ -141,6 +141,12 @@ nlohmann::json Fingerprint(const PpoOptions& options, const sim::Task& task,
   nlohmann::json j = Fingerprint(core::ToJson(options));
   j["task"] = task.spec().name;
   j["scene"] = task.spec().scene;
+  // What the task is, not only its name: a twin rebuilt, recalibrated or re-identified under the
+  // same paths is another task. The compiled model holds the scene's geometry and physics.
+  const mjModel* m = task.model();
+  std::string model(mj_sizeModel(m), '\0');
+  mj_saveModel(m, nullptr, model.data(), static_cast<int>(model.size()));
+  j["task_content"] = core::Fingerprint().Add(core::ToJson(task.spec()).dump()).Add(model).Hex();
   j["demos"] = demos.empty() ? "" : std::filesystem::weakly_canonical(demos).string();
   // What the file holds, too: demos remade under the same name are other demos.
   j["demos_content"] = demos.empty() ? "" : core::Fingerprint().AddFile(demos).Hex();
@@ -251,6 +257,21 @@ nlohmann::json LoadCheckpoint(const std::filesystem::path& path, PpoModel& model
   }
 }
 
+// A checkpoint's state text alone (fingerprint, counters); null if it cannot be read as one.
+nlohmann::json CheckpointState(const std::filesystem::path& path) {
+  try {
+    torch::serialize::InputArchive archive;
+    archive.load_from(path.string());
+    c10::IValue text;
+    if (!archive.try_read("twinforge_ppo_state", text)) return nullptr;
+    return nlohmann::json::parse(text.toStringRef());
+  } catch (const c10::Error&) {
+    return nullptr;
+  } catch (const nlohmann::json::exception&) {
+    return nullptr;
+  }
+}
+
 torch::nn::Sequential ValueNet(int in, int hidden) {
   torch::nn::Linear out(hidden, 1);
   {
@@ -319,8 +340,8 @@ MinibatchStats PpoMinibatch(PpoModel& model, const PpoOptions& options, const to
 }
 
 PpoReport TrainPpo(std::shared_ptr<const sim::Task> task, const std::filesystem::path& demos,
-                   const std::filesystem::path& out, const PpoOptions& options, bool fresh,
-                   core::Progress* progress) {
+                   const std::filesystem::path& out, const PpoOptions& options,
+                   CheckpointMode checkpoint, core::Progress* progress) {
   const auto session_start = Clock::now();
   const sim::TaskSpec& spec = task->spec();
   const bool discrete = spec.control.action == sim::ActionMode::kDiscrete;
@@ -364,7 +385,21 @@ PpoReport TrainPpo(std::shared_ptr<const sim::Task> task, const std::filesystem:
   int64_t env_steps = 0;
   double seconds_before = 0;
   report.best_eval_success = -1;
-  if (fresh) std::filesystem::remove(report.checkpoint);
+  if (checkpoint == CheckpointMode::kStartOver) std::filesystem::remove(report.checkpoint);
+  if (checkpoint == CheckpointMode::kResumeOrStartOver &&
+      std::filesystem::exists(report.checkpoint)) {
+    // Only its state text is read: a checkpoint of other inputs may not even load.
+    const nlohmann::json state = CheckpointState(report.checkpoint);
+    const nlohmann::json stored =
+        state.is_object() ? Fingerprint(state.value("fingerprint", nlohmann::json::object()))
+                          : nlohmann::json();
+    if (stored != fingerprint) {
+      spdlog::info("rl: {} was made from other inputs ({}); the teacher starts over",
+                   report.checkpoint.string(),
+                   state.is_object() ? Differences(stored, fingerprint) : "unreadable");
+      std::filesystem::remove(report.checkpoint);
+    }
+  }
   if (std::filesystem::exists(report.checkpoint)) {
     const nlohmann::json state = LoadCheckpoint(report.checkpoint, model, norm, return_norm);
     const nlohmann::json stored = Fingerprint(state.value("fingerprint", nlohmann::json::object()));

@@ -94,13 +94,22 @@ struct PpoReport {
   std::filesystem::path curve_csv, curve_svg, checkpoint;
 };
 
+// What TrainPpo does with a checkpoint it finds.
+enum class CheckpointMode {
+  kResume,             // resume it; throw Error naming it if it was made from other inputs
+  kResumeOrStartOver,  // resume it if it was made from the same inputs, else start over
+  kStartOver,          // discard it
+};
+
 // Trains a state policy for `task` and writes the best-evaluated weights to `out`, the curve
-// (CSV and SVG) beside it and a checkpoint `<out>.ckpt` after every iteration. When that
-// checkpoint exists and was made with the same task, demos and options (budgets and threads
-// aside, and evaluation, which changes nothing of training), training resumes from it; `fresh`
-// discards it. `demos` empty: no BC loss.
+// (CSV and SVG) beside it and a checkpoint `<out>.ckpt` after every iteration. A checkpoint's
+// inputs are the task (its spec and compiled model, so a twin rebuilt under the same path is
+// another task), the demos' content and the options (budgets and threads aside, and evaluation,
+// which changes nothing of training); `checkpoint` says what happens to one that exists.
+// `demos` empty: no BC loss.
 PpoReport TrainPpo(std::shared_ptr<const sim::Task> task, const std::filesystem::path& demos,
-                   const std::filesystem::path& out, const PpoOptions& options, bool fresh = false,
+                   const std::filesystem::path& out, const PpoOptions& options,
+                   CheckpointMode checkpoint = CheckpointMode::kResume,
                    core::Progress* progress = nullptr);
 
 }  // namespace twinforge::learn

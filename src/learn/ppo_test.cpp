@@ -54,7 +54,7 @@ TEST(Ppo, ImprovesSuccessOnATinyTask) {
   PpoOptions o = SmallOptions();
   o.max_iterations = 25;
   o.target_success = 1.01;  // run the whole budget
-  const PpoReport r = TrainPpo(task, "", dir / "teacher.pt", o, true);
+  const PpoReport r = TrainPpo(task, "", dir / "teacher.pt", o, CheckpointMode::kStartOver);
   EXPECT_EQ(r.iterations, 25);
   EXPECT_EQ(r.stopped_by, "iterations");
   const auto rows = ReadCsv(r.curve_csv);
@@ -120,10 +120,12 @@ TEST(Ppo, AResumedRunMatchesAnUninterruptedOne) {
   o.target_success = 1.01;
   o.max_iterations = 4;
   o.threads = 1;
-  const PpoReport whole = TrainPpo(task, demos, dir / "a" / "teacher.pt", o, true);
+  const PpoReport whole =
+      TrainPpo(task, demos, dir / "a" / "teacher.pt", o, CheckpointMode::kStartOver);
   o.max_iterations = 2;
   o.threads = 2;
-  const PpoReport first = TrainPpo(task, demos, dir / "b" / "teacher.pt", o, true);
+  const PpoReport first =
+      TrainPpo(task, demos, dir / "b" / "teacher.pt", o, CheckpointMode::kStartOver);
   EXPECT_EQ(first.iterations, 2);
   o.max_iterations = 4;
   const PpoReport second = TrainPpo(task, demos, dir / "b" / "teacher.pt", o);
@@ -149,7 +151,7 @@ TEST(Ppo, ACheckpointOfOtherOptionsOrAJunkOneIsRefusedByName) {
   o.num_envs = 4;
   o.epochs = 1;
   o.max_iterations = 1;
-  TrainPpo(task, "", dir / "t.pt", o, true);
+  TrainPpo(task, "", dir / "t.pt", o, CheckpointMode::kStartOver);
   o.seed = 99;
   o.max_iterations = 2;
   try {
@@ -170,7 +172,44 @@ TEST(Ppo, ACheckpointOfOtherOptionsOrAJunkOneIsRefusedByName) {
         }
       },
       core::Error);
-  EXPECT_EQ(TrainPpo(task, "", dir / "t.pt", o, true).iterations, 2);
+  EXPECT_EQ(TrainPpo(task, "", dir / "t.pt", o, CheckpointMode::kStartOver).iterations, 2);
+}
+
+// A twin rebuilt under the same path compiles to another model: its checkpoint is refused by name,
+// or, when asked to, the teacher starts over; the same inputs still resume.
+TEST(Ppo, ACheckpointOfAnotherModelIsRefusedOrStartedOver) {
+  PinMathThreads(1);
+  auto task = testing::ReachTask();
+  const auto dir = core::testing::TestDir("ppo_test", "model");
+  PpoOptions o = SmallOptions();
+  o.num_envs = 4;
+  o.epochs = 1;
+  o.max_iterations = 1;
+  TrainPpo(task, "", dir / "t.pt", o, CheckpointMode::kStartOver);
+  auto heavier =
+      std::make_shared<const sim::Task>(task->spec(), [](mjModel* m, const sim::TaskIndex&) {
+        for (int b = 0; b < m->nbody; ++b) m->body_mass[b] *= 1.5;
+      });
+  o.max_iterations = 2;
+  try {
+    TrainPpo(heavier, "", dir / "t.pt", o);
+    FAIL() << "resumed a checkpoint made with another model under the same task name";
+  } catch (const core::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("task_content"), std::string::npos) << e.what();
+  }
+  const PpoReport over = TrainPpo(heavier, "", dir / "t.pt", o, CheckpointMode::kResumeOrStartOver);
+  EXPECT_EQ(over.resumed_from, 0);
+  EXPECT_EQ(over.iterations, 2);
+  o.max_iterations = 3;
+  const PpoReport resumed =
+      TrainPpo(heavier, "", dir / "t.pt", o, CheckpointMode::kResumeOrStartOver);
+  EXPECT_EQ(resumed.resumed_from, 2);
+  EXPECT_EQ(resumed.iterations, 3);
+  // A junk checkpoint is set aside too.
+  std::ofstream(dir / "t.ckpt") << "junk";
+  EXPECT_EQ(TrainPpo(heavier, "", dir / "t.pt", o, CheckpointMode::kResumeOrStartOver).resumed_from,
+            0);
+  std::filesystem::remove_all(dir);
 }
 
 // Demos remade under the same file name are other demos: their checkpoint is not resumed.
@@ -182,7 +221,7 @@ TEST(Ppo, ACheckpointOfOtherDemosUnderTheSameNameIsRefused) {
   o.num_envs = 4;
   o.epochs = 1;
   o.max_iterations = 1;
-  TrainPpo(task, TinyDemos(dir), dir / "t.pt", o, true);
+  TrainPpo(task, TinyDemos(dir), dir / "t.pt", o, CheckpointMode::kStartOver);
   o.max_iterations = 2;
   const auto remade = TinyDemos(dir, 3);
   try {

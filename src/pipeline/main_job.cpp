@@ -200,17 +200,12 @@ class Job {
                                               {"success_rate", r.success_rate()},
                                               {"seconds", r.seconds}});
         });
-    // What the teacher learns from (a new budget or target continues it; anything else does not).
-    const std::string rl_source =
-        Fingerprint()
-            .Add(twin_hash)
-            .AddFile(run_ / "demos/sim.hdf5")
-            .Add(std::to_string(o_.rl_envs) + "/" + std::to_string(o_.seed) + "/" +
-                 std::to_string(o_.rl_bc_coef))
-            .Hex();
     Stage("rl",
           Fingerprint()
-              .Add(rl_source)
+              .Add(twin_hash)
+              .AddFile(run_ / "demos/sim.hdf5")
+              .Add(std::to_string(o_.rl_envs) + "/" + std::to_string(o_.seed) + "/" +
+                   std::to_string(o_.rl_bc_coef))
               .Add(std::to_string(o_.rl_minutes) + "/" + std::to_string(o_.rl_target))
               .Hex(),
           {"policies/teacher.pt", "policies/teacher.curve.svg"}, [&] {
@@ -224,17 +219,12 @@ class Job {
             p.eval_episodes = o_.rl_eval_episodes;
             core::Progress progress("rl", 0, "iterations");
             const bool demos = ReadSuccesses(run_ / "demos/sim.json") > 0;
-            // A checkpoint left by a killed run (or a smaller budget) resumes, unless it was made
-            // from other inputs (new sim demos, another twin): it names the demo file, not what
-            // the file held.
-            const std::filesystem::path source = run_ / "policies/teacher.ckpt.source";
-            const bool stale =
-                std::filesystem::exists(source) && core::ReadTextFile(source) != rl_source;
-            if (stale)
-              spdlog::info("rl: the sim demos or the twin changed; the teacher starts over");
-            core::WriteFileAtomic(source, rl_source);
+            // A checkpoint left by a killed run (or a smaller budget) resumes; one made from
+            // other inputs (new sim demos, a rebuilt twin) is set aside and the teacher starts
+            // over.
             const auto r = learn::TrainPpo(twin_task, demos ? run_ / "demos/sim.hdf5" : "",
-                                           run_ / "policies/teacher.pt", p, stale, &progress);
+                                           run_ / "policies/teacher.pt", p,
+                                           learn::CheckpointMode::kResumeOrStartOver, &progress);
             progress.Finish();
             WriteJson(run_ / "policies/teacher.json", {{"best_eval_success", r.best_eval_success},
                                                        {"iterations", r.iterations},
