@@ -167,6 +167,15 @@ BcReport TrainBc(const std::filesystem::path& demos, const std::filesystem::path
   config.action_dim = data.action_dim;
   config.discrete = data.discrete;
   config.hidden = options.hidden;
+  if (!data.discrete) {
+    // The demos' largest value per component (at least 1 mm or mrad): no task file is at hand.
+    config.action_scale.assign(data.action_dim, 1e-3);
+    for (const core::Episode& e : data.episodes)
+      for (std::size_t t = 0; t < e.length(); ++t)
+        for (int k = 0; k < data.action_dim; ++k)
+          config.action_scale[k] =
+              std::max<double>(config.action_scale[k], std::abs(e.actions.row(t)[k]));
+  }
   PolicyNet net(config);
   torch::optim::Adam optimizer(net->parameters(), torch::optim::AdamOptions(options.learning_rate));
   const std::vector<Sample>& held_out = data.valid.empty() ? data.train : data.valid;

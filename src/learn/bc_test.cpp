@@ -171,6 +171,7 @@ TEST(PolicyNet, TorchScriptExportGivesTheSameOutputs) {
       config.proprio_dim = points ? 9 : 17;
       config.discrete = discrete;
       config.action_dim = discrete ? 14 : 7;
+      if (!discrete) config.action_scale = {0.03, 0.03, 0.03, 0.2, 0.2, 0.2, 1.0};
       torch::manual_seed(points * 2 + discrete);
       PolicyNet net(config);
       {
@@ -195,6 +196,32 @@ TEST(PolicyNet, TorchScriptExportGivesTheSameOutputs) {
           << (got - expected).abs().max().item<float>();
       if (!discrete) EXPECT_TRUE(torch::equal(loaded.attr("log_std").toTensor(), net->log_std));
     }
+}
+
+// A continuous head works in units of the action scale: the same weights give each component
+// times its scale, the exploration starts at half of it, and a saved policy keeps it.
+TEST(PolicyNet, AContinuousHeadWorksInUnitsOfTheActionScale) {
+  PolicyConfig config;
+  config.point_features = 0;
+  config.proprio_dim = 17;
+  config.discrete = false;
+  config.action_dim = 7;
+  torch::manual_seed(3);
+  PolicyNet plain(config);
+  config.action_scale = {0.03, 0.03, 0.03, 0.2, 0.2, 0.2, 1.0};
+  torch::manual_seed(3);
+  PolicyNet scaled(config);
+  const torch::Tensor scale = torch::tensor({0.03f, 0.03f, 0.03f, 0.2f, 0.2f, 0.2f, 1.0f});
+  torch::NoGradGuard no_grad;
+  const torch::Tensor proprio = torch::randn({4, 17});
+  EXPECT_TRUE(torch::allclose(scaled->forward({}, proprio), plain->forward({}, proprio) * scale));
+  EXPECT_TRUE(torch::allclose(scaled->log_std, (0.5 * scale).log()));
+  const auto dir = core::testing::TestDir("bc_test", "action_scale");
+  SavePolicy(scaled, dir / "p.pt");
+  PolicyNet loaded = LoadPolicy(dir / "p.pt");
+  EXPECT_EQ(loaded->config().action_scale, config.action_scale);
+  EXPECT_TRUE(torch::equal(loaded->forward({}, proprio), scaled->forward({}, proprio)));
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

@@ -270,6 +270,7 @@ DistillReport TrainDistill(const std::filesystem::path& teacher_path,
   config.proprio_dim = sim::kProprioDim;
   config.action_dim = teacher->config().action_dim;
   config.discrete = teacher->config().discrete;
+  config.action_scale = teacher->config().action_scale;
   config.hidden = options.hidden;
   PolicyNet student(config);
   CheckPolicyFitsTask(config, *task, "the student");

@@ -100,6 +100,11 @@ sim::Action SampleGaussian(const float* mean, const float* log_std, double scale
   return sim::Action::Continuous(v);
 }
 
+std::vector<double> ContinuousActionScale(const sim::ActionLimits& limits) {
+  const double t = limits.translation, r = limits.rotation;
+  return {t, t, t, r, r, r, 1.0};
+}
+
 void CheckPolicyFitsTask(const PolicyConfig& config, const sim::Task& task,
                          const std::string& what) {
   const bool discrete = Discrete(task);

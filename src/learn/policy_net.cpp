@@ -50,8 +50,13 @@ PolicyNetImpl::PolicyNetImpl(const PolicyConfig& config) : config_(config) {
   torch::NoGradGuard no_grad;
   out->weight.mul_(0.01);
   out->bias.zero_();
-  if (!config.discrete)
-    log_std = register_parameter("log_std", torch::full({config.action_dim}, std::log(0.5)));
+  if (!config.discrete) {
+    action_scale_ = config.action_scale.empty()
+                        ? torch::ones({config.action_dim})
+                        : torch::tensor(std::vector<float>(config.action_scale.begin(),
+                                                           config.action_scale.end()));
+    log_std = register_parameter("log_std", (0.5 * action_scale_).log());
+  }
   obs_mean = register_buffer("obs_mean", torch::zeros({config.proprio_dim}));
   obs_std = register_buffer("obs_std", torch::ones({config.proprio_dim}));
 }
@@ -75,7 +80,8 @@ torch::Tensor PolicyNetImpl::HeadInput(const torch::Tensor& points, const torch:
 }
 
 torch::Tensor PolicyNetImpl::Head(const torch::Tensor& head_input) {
-  return head_->forward(head_input);
+  const torch::Tensor out = head_->forward(head_input);
+  return config_.discrete ? out : out * action_scale_;
 }
 
 int PolicyNetImpl::HeadInputDim() const {
@@ -142,6 +148,7 @@ void ExportTorchScript(PolicyNet& net, const std::filesystem::path& path) {
     module.register_parameter(name(p.key()), p.value().clone(), false);
   for (const auto& b : net->named_buffers())
     module.register_buffer(name(b.key()), b.value().clone());
+  if (!config.discrete) module.register_buffer("action_scale", net->ActionScale().clone());
   // The code mirrors PointEncoderImpl and PolicyNetImpl layer by layer.
   std::ostringstream code;
   const auto linear = [&](const std::string& in, const std::string& layer) {
@@ -167,7 +174,8 @@ void ExportTorchScript(PolicyNet& net, const std::filesystem::path& path) {
   }
   code << "    x = torch.tanh(" << linear("x", "head_0") << ")\n"
        << "    x = torch.tanh(" << linear("x", "head_2") << ")\n"
-       << "    return " << linear("x", "head_4") << "\n";
+       << "    return " << linear("x", "head_4") << (config.discrete ? "" : " * self.action_scale")
+       << "\n";
   module.define(code.str());
   const auto tmp = path.string() + ".tmp";
   if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path());

@@ -9,6 +9,7 @@
 
 #include <filesystem>
 #include <string>
+#include <vector>
 
 #include "core/config.h"
 
@@ -21,6 +22,10 @@ struct PolicyConfig {
   int action_dim = 14;     // discrete: number of moves; continuous: action size
   bool discrete = true;
   int hidden = 256;  // head MLP width (two layers)
+  // Continuous: each component's typical size (a task's per-step limits: m, rad, 1 for the
+  // gripper). The head learns actions divided by it, so a 3 cm move and the gripper's +-1 are
+  // fitted to the same relative precision, and log_std starts at half of it. Empty: all 1.
+  std::vector<double> action_scale;
   template <class A>
   void Serialize(A& a) {
     a("point_features", point_features);
@@ -29,6 +34,10 @@ struct PolicyConfig {
     a("action_dim", action_dim);
     a("discrete", discrete);
     a("hidden", hidden);
+    a("action_scale", action_scale);
+    a.Require(action_scale.empty() || (!discrete && int(action_scale.size()) == action_dim),
+              "action_scale", "one positive size per continuous action component, or none");
+    for (double x : action_scale) a.Require(x > 0, "action_scale", "positive sizes");
     a.Require(point_features >= 0 && points > 0 && proprio_dim >= 0 && action_dim > 0, "points",
               "non-negative input sizes and a positive action size");
   }
@@ -69,6 +78,7 @@ class PolicyNetImpl : public torch::nn::Module {
   // Log-likelihood of `actions` (discrete: [B] indices; continuous: [B, action_dim]), per row.
   torch::Tensor LogProb(const torch::Tensor& output, const torch::Tensor& actions) const;
   const PolicyConfig& config() const { return config_; }
+  const torch::Tensor& ActionScale() const { return action_scale_; }
   torch::Tensor log_std;            // [action_dim], continuous only
   torch::Tensor obs_mean, obs_std;  // [proprio_dim] buffers
   static constexpr double kObsClip = 10.0;
@@ -76,6 +86,7 @@ class PolicyNetImpl : public torch::nn::Module {
  private:
   torch::Tensor Features(const torch::Tensor& points, const torch::Tensor& normalized);
   PolicyConfig config_;
+  torch::Tensor action_scale_;  // [action_dim] (continuous), from the config: not a weight
   PointEncoder encoder_{nullptr};
   torch::nn::Sequential head_{nullptr};
 };

@@ -357,6 +357,7 @@ PpoReport TrainPpo(std::shared_ptr<const sim::Task> task, const std::filesystem:
   config.action_dim = discrete ? sim::kDiscreteActions : sim::kContinuousActionDim;
   config.discrete = discrete;
   config.hidden = options.hidden;
+  if (!discrete) config.action_scale = ContinuousActionScale(spec.control.limits);
   PpoModel model(config, options);
   PolicyNet& policy = model.policy;
   torch::nn::Sequential& value = model.value;

@@ -36,6 +36,10 @@ sim::Action SampleGaussian(const float* mean, const float* log_std, double scale
 sim::Action ChooseAction(const PolicyNet& net, const torch::Tensor& out,
                          const PolicyEvalOptions& options, core::Rng& rng);
 
+// A continuous policy's action_scale for a task: its per-step limits (translation x 3, rotation
+// x 3) and 1 for the gripper command.
+std::vector<double> ContinuousActionScale(const sim::ActionLimits& limits);
+
 // Throws Error naming `what` (e.g. the policy file) when the network's inputs or actions do not
 // fit the task.
 void CheckPolicyFitsTask(const PolicyConfig& config, const sim::Task& task,
