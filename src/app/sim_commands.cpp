@@ -1,9 +1,11 @@
 #include "app/sim_commands.h"
 
+#include <fstream>
 #include <iostream>
 #include <memory>
 
 #include "core/config.h"
+#include "core/error.h"
 #include "core/image.h"
 #include "core/thread_pool.h"
 #include "learn/evaluate.h"
@@ -67,7 +69,7 @@ void AddSimCommands(CLI::App& parent, int& exit_code) {
 
   // A learned policy's success rate, per level.
   struct EvalCli {
-    std::string policy, task;
+    std::string policy, task, trace;
     std::vector<int> levels{1};
     learn::PolicyEvalOptions options;
   };
@@ -90,8 +92,18 @@ void AddSimCommands(CLI::App& parent, int& exit_code) {
   eval->add_flag("--sample", eval_cli->options.sample,
                  "sample the policy's moves (as PPO trains and evaluates it) instead of taking "
                  "the most likely one");
+  eval->add_option("--trace", eval_cli->trace,
+                   "also write the first level's episode 0 step by step here (JSON lines: action, "
+                   "privileged state, reward; then success)");
   eval->callback([eval_cli, &exit_code] {
     auto task = std::make_shared<const sim::Task>(sim::LoadTaskSpec(eval_cli->task));
+    if (!eval_cli->trace.empty()) {
+      learn::PolicyEvalOptions o = eval_cli->options;
+      o.level = eval_cli->levels.front();
+      std::ofstream out(eval_cli->trace);
+      if (!out) throw core::IoError("cannot write the trace to " + eval_cli->trace);
+      learn::TracePolicyEpisode(eval_cli->policy, task, o, 0, out);
+    }
     core::Json levels = core::Json::array();
     for (int level : eval_cli->levels) {
       learn::PolicyEvalOptions o = eval_cli->options;

@@ -212,6 +212,25 @@ PolicyEvalReport EvaluatePolicy(const std::filesystem::path& policy,
   return EvaluatePolicy(net, std::move(task), options);
 }
 
+void TracePolicyEpisode(const std::filesystem::path& policy, std::shared_ptr<const sim::Task> task,
+                        const PolicyEvalOptions& options, int64_t episode, std::ostream& out) {
+  PolicyNet net = LoadPolicy(policy);
+  CheckPolicyFitsTask(net->config(), *task, policy.string());
+  net->eval();
+  const PolicyEpisode e = RunPolicyEpisodes(net, task, options, episode, 1, true).front();
+  const core::Episode& r = e.record;
+  auto row = [](const core::FloatArray& a, std::size_t t) {
+    return std::vector<float>(a.row(t), a.row(t) + a.row_size());
+  };
+  for (std::size_t t = 0; t < r.length(); ++t) {
+    nlohmann::json j = {{"step", t}, {"action", row(r.actions, t)}};
+    if (r.states.rows() > t) j["state"] = row(r.states, t);
+    if (r.rewards.size() > t) j["reward"] = r.rewards[t];
+    out << j.dump() << "\n";
+  }
+  out << nlohmann::json{{"success", e.steps > 0}, {"steps", e.steps}}.dump() << "\n";
+}
+
 InverseDistillReport InverseDistill(const std::filesystem::path& policy,
                                     std::shared_ptr<const sim::Task> task,
                                     const InverseDistillOptions& options,

@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <memory>
+#include <ostream>
 #include <vector>
 
 #include "core/progress.h"
@@ -33,6 +34,12 @@ struct PolicyEvalReport {
   std::vector<int> steps;  // per episode: control steps to success, -1 on failure
   double seconds = 0;
 };
+
+// Episode `episode` of an evaluation (reset as EvaluatePolicy resets it), one JSON object per
+// step: {"step", "action", "state" (privileged), "reward"}, then {"success", "steps"}. For
+// seeing where a policy goes wrong.
+void TracePolicyEpisode(const std::filesystem::path& policy, std::shared_ptr<const sim::Task> task,
+                        const PolicyEvalOptions& options, int64_t episode, std::ostream& out);
 
 // Throws Error naming the policy file when its inputs or actions do not fit the task.
 PolicyEvalReport EvaluatePolicy(const std::filesystem::path& policy,

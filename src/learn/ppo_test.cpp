@@ -45,6 +45,12 @@ PpoOptions SmallOptions() {
   return o;
 }
 
+// One quick iteration, for the checkpoint tests.
+PpoOptions OneIteration() {
+  PpoOptions o = OneIteration();
+  return o;
+}
+
 // From a few percent of sampled episodes to most of them, and the policy file written is the one
 // whose evaluation was best.
 TEST(Ppo, ImprovesSuccessOnATinyTask) {
@@ -147,10 +153,7 @@ TEST(Ppo, ACheckpointOfOtherOptionsOrAJunkOneIsRefusedByName) {
   PinMathThreads(1);
   auto task = testing::ReachTask();
   const auto dir = core::testing::TestDir("ppo_test", "refuse");
-  PpoOptions o = SmallOptions();
-  o.num_envs = 4;
-  o.epochs = 1;
-  o.max_iterations = 1;
+  PpoOptions o = OneIteration();
   TrainPpo(task, "", dir / "t.pt", o, CheckpointMode::kStartOver);
   o.seed = 99;
   o.max_iterations = 2;
@@ -181,10 +184,7 @@ TEST(Ppo, ACheckpointOfAnotherModelIsRefusedOrStartedOver) {
   PinMathThreads(1);
   auto task = testing::ReachTask();
   const auto dir = core::testing::TestDir("ppo_test", "model");
-  PpoOptions o = SmallOptions();
-  o.num_envs = 4;
-  o.epochs = 1;
-  o.max_iterations = 1;
+  PpoOptions o = OneIteration();
   TrainPpo(task, "", dir / "t.pt", o, CheckpointMode::kStartOver);
   auto heavier =
       std::make_shared<const sim::Task>(task->spec(), [](mjModel* m, const sim::TaskIndex&) {
@@ -217,10 +217,7 @@ TEST(Ppo, ACheckpointOfOtherDemosUnderTheSameNameIsRefused) {
   PinMathThreads(1);
   auto task = testing::ReachTask();
   const auto dir = core::testing::TestDir("ppo_test", "remade");
-  PpoOptions o = SmallOptions();
-  o.num_envs = 4;
-  o.epochs = 1;
-  o.max_iterations = 1;
+  PpoOptions o = OneIteration();
   TrainPpo(task, TinyDemos(dir), dir / "t.pt", o, CheckpointMode::kStartOver);
   o.max_iterations = 2;
   const auto remade = TinyDemos(dir, 3);

@@ -3,7 +3,7 @@
 //
 // Per step, under data/demo_<i>/ (core/dataset.h):
 //   actions            [T, 1] discrete move index (0..13), or [T, 7] continuous action
-//   obs/proprio        [T, 9]  tool position, quaternion (w, x, y, z; w >= 0), finger positions
+//   obs/proprio        [T, 9]  tool position, quaternion (w, x, y, z; x >= 0), finger positions
 //   obs/joint_positions [T, 7]
 //   obs/scene_points   [T, N, 3] from the camera's depth, arm removed, workspace-cropped
 //   obs/arm_points     [T, M, 3] on the arm at its measured joints (forward kinematics)

@@ -329,8 +329,12 @@ core::Pose Env::SitePose(int site) const {
 core::Pose Env::EePose() const { return SitePose(task_->index().robot.ee_site); }
 
 void MakeProprio(const core::Pose& ee, double finger_left, double finger_right, float* out) {
+  // One sign per orientation: the one nearer the tool pointing straight down (the base's x axis
+  // turned half a turn; w, x, y, z = 0, 1, 0, 0), where tools work. The sign then never flips in
+  // the workspace; the choice w >= 0 flipped it each time a top-down tool turned through w = 0,
+  // and a policy saw one pose as two inputs far apart.
   core::Quat q = ee.rotation;
-  if (q.w() < 0) q.coeffs() = -q.coeffs();  // one sign per orientation
+  if (q.x() < 0) q.coeffs() = -q.coeffs();
   const double values[kProprioDim] = {
       ee.translation.x(), ee.translation.y(), ee.translation.z(), q.w(), q.x(), q.y(), q.z(),
       finger_left,        finger_right};

@@ -24,7 +24,8 @@ struct StepResult {
 // joint positions (2).
 constexpr int kProprioDim = 9;
 // Writes proprioception from a tool pose and the two finger positions (the quaternion's sign is
-// chosen so that w >= 0): the twin, the proxy and a real robot's recorder all fill it here.
+// chosen so that x >= 0: the hemisphere of the tool pointing down, so that it does not flip as a
+// top-down tool turns): the twin, the proxy and a real robot's recorder all fill it here.
 void MakeProprio(const core::Pose& ee, double finger_left, double finger_right, float* out);
 
 // Size of a task's privileged state (see Env::State).

@@ -2,6 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
+#include <cmath>
+
 #include "core/error.h"
 
 namespace twinforge::sim {
@@ -10,6 +13,26 @@ namespace {
 std::shared_ptr<const Task> DrawerTask() {
   static auto task = std::make_shared<const Task>(LoadTaskSpec("open_drawer"));
   return task;
+}
+
+// A top-down tool turning all the way round, wobbling a little: its proprioceptive quaternion
+// moves smoothly (with the sign chosen by w >= 0 it flipped each time w crossed zero).
+TEST(Env, TheToolsQuaternionDoesNotFlipAsATopDownToolTurns) {
+  std::array<float, kProprioDim> last{}, now{};
+  for (int k = 0; k <= 340; ++k) {
+    const double yaw = (k - 170) * M_PI / 180;
+    const core::Pose ee{Eigen::Vector3d(0.5, 0, 0.2),
+                        core::Quat(Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ())) *
+                            core::Quat(Eigen::AngleAxisd(M_PI + 0.05 * std::sin(3 * yaw),
+                                                         Eigen::Vector3d::UnitX()))};
+    MakeProprio(ee, 0.02, 0.02, now.data());
+    if (k > 0) {
+      double jump = 0;
+      for (int i = 3; i < 7; ++i) jump += (now[i] - last[i]) * (now[i] - last[i]);
+      EXPECT_LT(std::sqrt(jump), 0.05) << "yaw " << yaw;
+    }
+    last = now;
+  }
 }
 
 TEST(Env, ArmTracksADiscreteMoveWithinOneControlPeriod) {
