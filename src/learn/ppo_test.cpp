@@ -47,7 +47,10 @@ PpoOptions SmallOptions() {
 
 // One quick iteration, for the checkpoint tests.
 PpoOptions OneIteration() {
-  PpoOptions o = OneIteration();
+  PpoOptions o = SmallOptions();
+  o.num_envs = 4;
+  o.epochs = 1;
+  o.max_iterations = 1;
   return o;
 }
 
