@@ -57,30 +57,32 @@ class Job {
     std::vector<std::string> scans = {"scan/trajectory.json"};
     if (o_.camera_frames > 0) scans.push_back("camera/frames.json");
     if (articulated) scans.push_back("scan_open/trajectory.json");
-    Stage("scan",
-          Fingerprint()
-              .Add(reality)
-              .Add(core::ToJson(o_.scan).dump())
-              .Add(std::to_string(o_.camera_frames))
-              .Hex(),
-          scans, [&] {
-            Scan(run_ / "scan", false);
-            // The fixed camera sees the scene as it was scanned (before the part is moved).
-            if (o_.camera_frames > 0) {
-              std::filesystem::remove_all(run_ / "camera");
-              reality::Robot& robot = Robot();
-              const sim::Kinematics kinematics(
-                  sim::LoadRobotSpec(reality::RobotDescriptionPath(robot.Info().robot)));
-              core::Progress progress("camera frames", o_.camera_frames, "frames");
-              reality::CaptureCameraFrames(robot, kinematics,
-                                           Eigen::Vector3d(task_.camera.look_at.data()) +
-                                               Eigen::Vector3d(0, 0, reality::kCameraFramesHeight),
-                                           o_.camera_frames, reality::kCameraFramesSpread, o_.seed,
-                                           run_ / "camera", &progress);
-              progress.Finish();
-            }
-            if (articulated) Scan(run_ / "scan_open", true);
-          });
+    Stage(
+        "scan",
+        Fingerprint()
+            .Add(reality)
+            .Add(core::ToJson(o_.scan).dump())
+            .Add(std::to_string(o_.camera_frames) + "/" + std::to_string(o_.camera_frames_height) +
+                 "/" + std::to_string(o_.camera_frames_spread))
+            .Hex(),
+        scans, [&] {
+          Scan(run_ / "scan", false);
+          // The fixed camera sees the scene as it was scanned (before the part is moved).
+          if (o_.camera_frames > 0) {
+            std::filesystem::remove_all(run_ / "camera");
+            reality::Robot& robot = Robot();
+            const sim::Kinematics kinematics(
+                sim::LoadRobotSpec(reality::RobotDescriptionPath(robot.Info().robot)));
+            core::Progress progress("camera frames", o_.camera_frames, "frames");
+            reality::CaptureCameraFrames(robot, kinematics,
+                                         Eigen::Vector3d(task_.camera.look_at.data()) +
+                                             Eigen::Vector3d(0, 0, o_.camera_frames_height),
+                                         o_.camera_frames, o_.camera_frames_spread, o_.seed,
+                                         run_ / "camera", &progress);
+            progress.Finish();
+          }
+          if (articulated) Scan(run_ / "scan_open", true);
+        });
     Stage("twin",
           Fingerprint()
               .AddFile(run_ / "scan/trajectory.json")
