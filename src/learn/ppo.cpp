@@ -217,23 +217,43 @@ void SaveCheckpoint(const std::filesystem::path& path, PpoModel& model, const Ru
   std::filesystem::rename(tmp, path);
 }
 
-nlohmann::json LoadCheckpoint(const std::filesystem::path& path, PpoModel& model, RunningNorm& norm,
-                              RunningNorm& return_norm) {
-  PolicyNet& policy = model.policy;
-  torch::nn::Sequential& value = model.value;
-  torch::optim::Adam& optimizer = *model.optimizer;
+// A checkpoint file, read once: its archive, and its state text (fingerprint, counters), which is
+// null if the file is not a twinforge PPO checkpoint or cannot be read at all.
+struct Checkpoint {
+  torch::serialize::InputArchive archive;
+  nlohmann::json state;
+  std::string error;  // why `state` is null
+};
+
+std::unique_ptr<Checkpoint> ReadCheckpoint(const std::filesystem::path& path) {
+  auto checkpoint = std::make_unique<Checkpoint>();
   try {
-    torch::serialize::InputArchive archive, p, v, o;
-    archive.load_from(path.string());
+    checkpoint->archive.load_from(path.string());
     c10::IValue text;
-    if (!archive.try_read("twinforge_ppo_state", text))
-      throw core::Error(path.string() + ": not a twinforge PPO checkpoint");
+    if (!checkpoint->archive.try_read("twinforge_ppo_state", text))
+      checkpoint->error = "not a twinforge PPO checkpoint";
+    else
+      checkpoint->state = nlohmann::json::parse(text.toStringRef());
+  } catch (const c10::Error& e) {
+    checkpoint->error = std::string("unreadable checkpoint (") + e.what_without_backtrace() + ")";
+  } catch (const nlohmann::json::exception& e) {
+    checkpoint->error = std::string("unreadable state (") + e.what() + ")";
+  }
+  return checkpoint;
+}
+
+// Restores weights, optimizer and normalizers from a checkpoint whose state was read.
+void RestoreCheckpoint(const std::filesystem::path& path, Checkpoint& checkpoint, PpoModel& model,
+                       RunningNorm& norm, RunningNorm& return_norm) {
+  torch::serialize::InputArchive& archive = checkpoint.archive;
+  try {
+    torch::serialize::InputArchive p, v, o;
     archive.read("policy", p);
     archive.read("value", v);
     archive.read("optimizer", o);
-    policy->load(p);
-    value->load(v);
-    optimizer.load(o);
+    model.policy->load(p);
+    model.value->load(v);
+    model.optimizer->load(o);
     torch::Tensor mean, var, count;
     archive.read("norm_mean", mean);
     archive.read("norm_var", var);
@@ -250,25 +270,9 @@ nlohmann::json LoadCheckpoint(const std::filesystem::path& path, PpoModel& model
     archive.read("return_count", return_count);
     return_norm.var[0] = return_var[0].item<double>();
     return_norm.count = return_count.item<double>();
-    return nlohmann::json::parse(text.toStringRef());
   } catch (const c10::Error& e) {
     throw core::Error(path.string() + ": unreadable checkpoint (" + e.what_without_backtrace() +
                       "); delete it or pass --fresh");
-  }
-}
-
-// A checkpoint's state text alone (fingerprint, counters); null if it cannot be read as one.
-nlohmann::json CheckpointState(const std::filesystem::path& path) {
-  try {
-    torch::serialize::InputArchive archive;
-    archive.load_from(path.string());
-    c10::IValue text;
-    if (!archive.try_read("twinforge_ppo_state", text)) return nullptr;
-    return nlohmann::json::parse(text.toStringRef());
-  } catch (const c10::Error&) {
-    return nullptr;
-  } catch (const nlohmann::json::exception&) {
-    return nullptr;
   }
 }
 
@@ -387,27 +391,34 @@ PpoReport TrainPpo(std::shared_ptr<const sim::Task> task, const std::filesystem:
   double seconds_before = 0;
   report.best_eval_success = -1;
   if (checkpoint == CheckpointMode::kStartOver) std::filesystem::remove(report.checkpoint);
-  if (checkpoint == CheckpointMode::kResumeOrStartOver &&
-      std::filesystem::exists(report.checkpoint)) {
-    // Only its state text is read: a checkpoint of other inputs may not even load.
-    const nlohmann::json state = CheckpointState(report.checkpoint);
+  std::unique_ptr<Checkpoint> stored_checkpoint;
+  if (std::filesystem::exists(report.checkpoint))
+    stored_checkpoint = ReadCheckpoint(report.checkpoint);
+  if (checkpoint == CheckpointMode::kResumeOrStartOver && stored_checkpoint) {
+    // Only its state text is compared: a checkpoint of other inputs may not even restore.
+    const nlohmann::json& state = stored_checkpoint->state;
     const nlohmann::json stored =
         state.is_object() ? Fingerprint(state.value("fingerprint", nlohmann::json::object()))
                           : nlohmann::json();
     if (stored != fingerprint) {
       spdlog::info("rl: {} was made from other inputs ({}); the teacher starts over",
                    report.checkpoint.string(),
-                   state.is_object() ? Differences(stored, fingerprint) : "unreadable");
+                   state.is_object() ? Differences(stored, fingerprint) : stored_checkpoint->error);
+      stored_checkpoint.reset();
       std::filesystem::remove(report.checkpoint);
     }
   }
-  if (std::filesystem::exists(report.checkpoint)) {
-    const nlohmann::json state = LoadCheckpoint(report.checkpoint, model, norm, return_norm);
+  if (stored_checkpoint) {
+    if (!stored_checkpoint->state.is_object())
+      throw core::Error(report.checkpoint.string() + ": " + stored_checkpoint->error +
+                        "; delete it or pass --fresh");
+    const nlohmann::json& state = stored_checkpoint->state;
     const nlohmann::json stored = Fingerprint(state.value("fingerprint", nlohmann::json::object()));
     if (stored != fingerprint)
       throw core::Error(report.checkpoint.string() +
                         ": made with another task, demos or options (" +
                         Differences(stored, fingerprint) + "); pass --fresh to start over");
+    RestoreCheckpoint(report.checkpoint, *stored_checkpoint, model, norm, return_norm);
     iteration = state["iteration"];
     env_steps = state["env_steps"];
     seconds_before = state["seconds"];

@@ -26,13 +26,6 @@ double DegreesBetween(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
   return std::acos(std::clamp(a.normalized().dot(b.normalized()), -1.0, 1.0)) * 180 / M_PI;
 }
 
-// Whether body `b` is `root` or hangs below it.
-bool InSubtree(const mjModel* m, int b, int root) {
-  for (; b > 0; b = m->body_parentid[b])
-    if (b == root) return true;
-  return false;
-}
-
 // The twin's part `name` and every part jointed below it.
 std::vector<std::string> TwinSubtree(const real2sim::TwinSpec& spec, const std::string& name) {
   std::vector<std::string> out{name};
@@ -123,7 +116,7 @@ TwinScore ScoreTwin(const std::filesystem::path& twin_dir, const std::filesystem
     const int root = mj_name2id(m, mjOBJ_BODY, name.c_str());
     if (root < 0) throw core::Error("world " + world_dir.string() + " has no body " + name);
     auto mine = [&](int g) {
-      return InSubtree(m, m->geom_bodyid[g], root) && sim::GeomRgba(m, g)[3] > 0;
+      return sim::InSubtree(m, m->geom_bodyid[g], root) && sim::GeomRgba(m, g)[3] > 0;
     };
     const sim::SurfaceSampler sampler(m, ~0u, options.density, 16, 200000, mine);
     std::vector<float> xyz(3 * std::size_t(sampler.capacity()));

@@ -129,11 +129,7 @@ core::Json TwinEditSession::Export(const ExportOptions& options) {
   const sim::DataPtr data = sim::MakeData(m);
   mj_forward(m, data.get());
   const int mount = mj_name2id(m, mjOBJ_BODY, "robot_mount");
-  auto on_robot = [&](int body) {
-    for (; body > 0; body = m->body_parentid[body])
-      if (body == mount) return true;
-    return false;
-  };
+  auto on_robot = [&](int body) { return sim::InSubtree(m, body, mount); };
   std::map<int, int> mesh_index;  // MuJoCo mesh id -> index in "meshes"
   core::Json geoms = core::Json::array(), meshes = core::Json::array();
   for (int g = 0; g < m->ngeom; ++g) {

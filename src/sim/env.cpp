@@ -25,15 +25,6 @@ int FreeJointOf(const mjModel* m, int body) {
   return -1;
 }
 
-// Whether `body` descends from the robot mount.
-bool IsRobotBody(const mjModel* m, int body, int mount) {
-  while (body > 0) {
-    if (body == mount) return true;
-    body = m->body_parentid[body];
-  }
-  return false;
-}
-
 }  // namespace
 
 Env::Env(std::shared_ptr<const Task> task, int env_id)
@@ -212,14 +203,14 @@ void Env::RandomizePhysics() {
   const double damping = rng_.Uniform(p.damping[0], p.damping[1]);
   const double gain = rng_.Uniform(p.actuator_gain[0], p.actuator_gain[1]);
   for (int g = 0; g < m->ngeom; ++g)
-    if (!IsRobotBody(m, m->geom_bodyid[g], mount)) m->geom_friction[3 * g] *= friction;
+    if (!InSubtree(m, m->geom_bodyid[g], mount)) m->geom_friction[3 * g] *= friction;
   for (int b = 1; b < m->nbody; ++b)
-    if (!IsRobotBody(m, b, mount)) {
+    if (!InSubtree(m, b, mount)) {
       m->body_mass[b] *= mass;
       for (int c = 0; c < 3; ++c) m->body_inertia[3 * b + c] *= mass;
     }
   for (int v = 0; v < m->nv; ++v)
-    if (!IsRobotBody(m, m->dof_bodyid[v], mount)) m->dof_damping[v] *= damping;
+    if (!InSubtree(m, m->dof_bodyid[v], mount)) m->dof_damping[v] *= damping;
   for (int a = 0; a < m->nu; ++a) {
     m->actuator_gainprm[mjNGAIN * a] *= gain;
     m->actuator_biasprm[mjNBIAS * a + 1] *= gain;

@@ -36,6 +36,13 @@ DataPtr MakeData(const mjModel* m) {
   return DataPtr(d);
 }
 
+bool InSubtree(const mjModel* m, int body, int root) {
+  if (root < 1) return false;
+  for (; body > 0; body = m->body_parentid[body])
+    if (body == root) return true;
+  return false;
+}
+
 std::string MujocoVersion() {
   const int v = mj_version();  // e.g. 222
   return std::to_string(v / 100) + "." + std::to_string(v / 10 % 10) + "." + std::to_string(v % 10);

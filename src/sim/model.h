@@ -27,6 +27,9 @@ ModelPtr LoadModelFromText(const std::string& xml, const std::string& origin = "
 
 DataPtr MakeData(const mjModel* m);
 
+// Whether body `body` is `root` or hangs below it (false for the world body and for root < 1).
+bool InSubtree(const mjModel* m, int body, int root);
+
 // "2.2.2"
 std::string MujocoVersion();
 

@@ -83,9 +83,9 @@ RealFrame ReadFrame(const core::Scan& scan, size_t i, TwinGeometry& geometry) {
   frame.arm = geometry
                   .Posed(info.joint_positions, info.gripper_width,
                          [&](int g) {
-                           for (int b = m->geom_bodyid[g]; b > 0; b = m->body_parentid[b])
-                             if (b == mount) return Eigen::Vector3d::Ones().eval();
-                           return Eigen::Vector3d::Zero().eval();
+                           return sim::InSubtree(m, m->geom_bodyid[g], mount)
+                                      ? Eigen::Vector3d::Ones().eval()
+                                      : Eigen::Vector3d::Zero().eval();
                          })
                   .colors;
   frame.rays = Rays(info.intrinsics).reshape({-1, 3});
@@ -164,8 +164,12 @@ torch::Tensor ToTensor6(const Vector6& v) {
   return torch::from_blob(const_cast<double*>(v.data()), {6}, kDouble).clone();
 }
 
-SoftImage RenderAt(const RealFrame& f, const Vector6& delta, const SoftRasterOptions& raster) {
-  return SoftRasterize(f.twin, f.intrinsics, PerturbPose(f.reported, ToTensor6(delta)), raster);
+// The twin rendered from the reported pose moved by `delta`, with the arm's share of each pixel
+// as its colour (rgb channel 0), for the depth residuals and their weights.
+SoftImage RenderArmShare(const RealFrame& f, const Vector6& delta,
+                         const SoftRasterOptions& raster) {
+  return SoftRasterize({f.twin.vertices, f.twin.faces, f.arm}, f.intrinsics,
+                       PerturbPose(f.reported, ToTensor6(delta)), raster);
 }
 
 // Levenberg-Marquardt on the frames' depth residuals: the objective is the mean Huber depth
@@ -192,10 +196,9 @@ Vector6 GaussNewton(const std::vector<RealFrame>& frames, const CalibrateOptions
   Vector6 prior;
   prior << Eigen::Vector3d::Constant(2 * millimetre / (o.prior_rotation * o.prior_rotation)),
       Eigen::Vector3d::Constant(2 * millimetre / (o.prior_translation * o.prior_translation));
-  // The twin rendered with the arm's share of each pixel as its colour, and that share as weight.
+  // A pixel's weight: 1 on the scene, arm_weight on the arm.
   auto render = [&](const RealFrame& f, const Vector6& delta, torch::Tensor* weight) {
-    SoftImage image = SoftRasterize({f.twin.vertices, f.twin.faces, f.arm}, f.intrinsics,
-                                    PerturbPose(f.reported, ToTensor6(delta)), raster);
+    SoftImage image = RenderArmShare(f, delta, raster);
     *weight = 1 + (o.arm_weight - 1) * image.rgb.select(2, 0);
     return image;
   };
@@ -225,7 +228,7 @@ Vector6 GaussNewton(const std::vector<RealFrame>& frames, const CalibrateOptions
         Vector6 plus = delta, minus = delta;
         plus[k] += step;
         minus[k] -= step;
-        const SoftImage a = RenderAt(f, plus, raster), b = RenderAt(f, minus, raster);
+        const SoftImage a = RenderArmShare(f, plus, raster), b = RenderArmShare(f, minus, raster);
         const auto column = (a.depth - b.depth) / (2 * step);
         use = use & (a.silhouette > 0.99) & (b.silhouette > 0.99) & (column.abs() < jump);
         columns.push_back(column);
