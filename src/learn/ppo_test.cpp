@@ -208,8 +208,16 @@ TEST(Ppo, ACheckpointOfAnotherModelIsRefusedOrStartedOver) {
       TrainPpo(heavier, "", dir / "t.pt", o, CheckpointMode::kResumeOrStartOver);
   EXPECT_EQ(resumed.resumed_from, 2);
   EXPECT_EQ(resumed.iterations, 3);
-  // A junk checkpoint is set aside too.
+  // A junk checkpoint is named in the error when resuming, and set aside when asked to.
   std::ofstream(dir / "t.ckpt") << "junk";
+  try {
+    TrainPpo(heavier, "", dir / "t.pt", o);
+    FAIL() << "resumed a junk checkpoint";
+  } catch (const core::Error& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find((dir / "t.ckpt").string()), std::string::npos) << what;
+    EXPECT_NE(what.find("--fresh"), std::string::npos) << what;
+  }
   EXPECT_EQ(TrainPpo(heavier, "", dir / "t.pt", o, CheckpointMode::kResumeOrStartOver).resumed_from,
             0);
   std::filesystem::remove_all(dir);
