@@ -204,19 +204,29 @@ PolicyEvalReport EvaluatePolicy(PolicyNet& net, std::shared_ptr<const sim::Task>
   return report;
 }
 
+namespace {
+
+// A policy file's network in evaluation mode; throws Error naming the file when it does not fit
+// the task.
+PolicyNet LoadPolicyFor(const std::filesystem::path& policy, const sim::Task& task) {
+  PolicyNet net = LoadPolicy(policy);
+  CheckPolicyFitsTask(net->config(), task, policy.string());
+  net->eval();
+  return net;
+}
+
+}  // namespace
+
 PolicyEvalReport EvaluatePolicy(const std::filesystem::path& policy,
                                 std::shared_ptr<const sim::Task> task,
                                 const PolicyEvalOptions& options) {
-  PolicyNet net = LoadPolicy(policy);
-  CheckPolicyFitsTask(net->config(), *task, policy.string());
+  PolicyNet net = LoadPolicyFor(policy, *task);
   return EvaluatePolicy(net, std::move(task), options);
 }
 
 void TracePolicyEpisode(const std::filesystem::path& policy, std::shared_ptr<const sim::Task> task,
                         const PolicyEvalOptions& options, int64_t episode, std::ostream& out) {
-  PolicyNet net = LoadPolicy(policy);
-  CheckPolicyFitsTask(net->config(), *task, policy.string());
-  net->eval();
+  PolicyNet net = LoadPolicyFor(policy, *task);
   const PolicyEpisode e = RunPolicyEpisodes(net, task, options, episode, 1, true).front();
   const core::Episode& r = e.record;
   auto row = [](const core::FloatArray& a, std::size_t t) {
@@ -239,9 +249,7 @@ InverseDistillReport InverseDistill(const std::filesystem::path& policy,
   if (options.successes <= 0 || options.round <= 0 || options.rollout.episodes <= 0)
     throw core::ConfigError("train inverse-distill", "n",
                             "positive numbers of demos, attempts and episodes per round");
-  PolicyNet net = LoadPolicy(policy);
-  CheckPolicyFitsTask(net->config(), *task, policy.string());
-  net->eval();
+  PolicyNet net = LoadPolicyFor(policy, *task);
   const nlohmann::json env_args = {
       {"env_name", task->spec().name},
       {"type", "twinforge"},
