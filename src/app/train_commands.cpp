@@ -65,7 +65,10 @@ void AddInverseDistill(CLI::App& train, int& exit_code) {
   auto* c = train.add_subcommand(
       "inverse-distill",
       "roll a real-demo policy out in the twin; keep its successes as sim demos (JSON report)");
-  c->add_option("--policy", cli->policy, "policy from `train bc`")->required();
+  c->add_option("--policy", cli->policy,
+                "policy from `train bc`, or `expert`: the twin's scripted operator (a person "
+                "demonstrating in the twin) for tasks whose real-demo policy never succeeds there")
+      ->required();
   c->add_option("--task", cli->task, "task name (the twin's) or task.yaml")->required();
   c->add_option("--twin", cli->twin,
                 "twin directory (`twin build --out`); default: the task's "
@@ -88,7 +91,9 @@ void AddInverseDistill(CLI::App& train, int& exit_code) {
     auto task = LoadTrainTask(cli->task, cli->twin);
     core::Progress progress("inverse distillation", cli->options.successes, "demos");
     const learn::InverseDistillReport r =
-        learn::InverseDistill(cli->policy, task, cli->options, cli->out, &progress);
+        cli->policy == "expert"
+            ? learn::ExpertDemos(task, cli->options, cli->out, &progress)
+            : learn::InverseDistill(cli->policy, task, cli->options, cli->out, &progress);
     progress.Finish();
     const nlohmann::json report = {{"policy", cli->policy},
                                    {"task", task->spec().name},
@@ -183,9 +188,17 @@ void AddRl(CLI::App& train, int& exit_code) {
   c->add_option("--level", o.level, "randomization level 0..3")->check(CLI::Range(0, 3));
   c->add_option("--seed", o.seed, "seed");
   c->add_option("--bc-coef", o.bc_coef, "weight of the BC loss")->check(CLI::Range(0.0, 100.0));
+  c->add_option("--bc-pretrain-steps", o.bc_pretrain_steps,
+                "Adam steps of BC alone on the demos before PPO (0: none)")
+      ->check(CLI::NonNegativeNumber);
+  c->add_option("--critic-warmup", o.critic_warmup,
+                "first iterations that train the value network alone")
+      ->check(CLI::NonNegativeNumber);
   c->add_option("--lr", o.learning_rate, "Adam learning rate")->check(CLI::Range(1e-6, 1.0));
-  c->add_option("--target", o.target_success, "stop at this greedy success rate")
+  c->add_option("--target", o.target_success, "stop at this evaluation success rate")
       ->check(CLI::Range(0.0, 1.0));
+  c->add_flag("!--greedy-eval", o.eval_sample,
+              "evaluate the mean or most likely action (default: sampled, as PPO trains)");
   c->add_option("--eval-every", o.eval_every, "iterations between evaluations")
       ->check(CLI::PositiveNumber);
   c->add_option("--eval-episodes", o.eval_episodes, "episodes per evaluation")
@@ -205,20 +218,23 @@ void AddRl(CLI::App& train, int& exit_code) {
         task, demos, cli->out, cli->options,
         cli->fresh ? learn::CheckpointMode::kStartOver : learn::CheckpointMode::kResume, &progress);
     progress.Finish();
-    const nlohmann::json report = {{"policy", cli->out},
-                                   {"task", task->spec().name},
-                                   {"demos", demos.empty() ? "none" : demos},
-                                   {"iterations", r.iterations},
-                                   {"resumed_from", r.resumed_from},
-                                   {"env_steps", r.env_steps},
-                                   {"seconds", r.seconds},
-                                   {"stopped_by", r.stopped_by},
-                                   {"best_eval_success", r.best_eval_success},
-                                   {"best_iteration", r.best_iteration},
-                                   {"update_samples_per_s", r.update_samples_per_s},
-                                   {"curve_csv", r.curve_csv.string()},
-                                   {"curve_svg", r.curve_svg.string()},
-                                   {"checkpoint", r.checkpoint.string()}};
+    const nlohmann::json report = {
+        {"policy", cli->out},
+        {"task", task->spec().name},
+        {"demos", demos.empty() ? "none" : demos},
+        {"iterations", r.iterations},
+        {"resumed_from", r.resumed_from},
+        {"env_steps", r.env_steps},
+        {"seconds", r.seconds},
+        {"stopped_by", r.stopped_by},
+        {"best_eval_success", r.best_eval_success},
+        {"best_iteration", r.best_iteration},
+        {"pretrain_bc_loss", r.pretrain_bc_loss},  // NaN is written as null
+        {"pretrain_eval_success", r.pretrain_eval_success},
+        {"update_samples_per_s", r.update_samples_per_s},
+        {"curve_csv", r.curve_csv.string()},
+        {"curve_svg", r.curve_svg.string()},
+        {"checkpoint", r.checkpoint.string()}};
     std::cout << report.dump(2) << "\n";
     exit_code = 0;
   });

@@ -7,6 +7,7 @@
 // optimizer, the normalizer and the counters to resume step for step.
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 #include <filesystem>
 #include <memory>
@@ -32,6 +33,13 @@ struct PpoOptions {
   // steps at every minibatch, weighted by bc_coef. No demos: PPO from scratch.
   double bc_coef = 0.1;
   int bc_batch = 32;
+  // BC alone before PPO starts: bc_pretrain_steps Adam steps of bc_pretrain_batch demo steps, the
+  // observation normalizer started from the demos' states. PPO then fine-tunes an imitation of the
+  // demos rather than a random policy; for the first critic_warmup iterations only the value
+  // network trains, so the advantages the policy first sees come from a critic fitted to it.
+  int bc_pretrain_steps = 0;
+  int bc_pretrain_batch = 256;
+  int critic_warmup = 0;
   // Stopping: success over eval_episodes (their own seeds) every eval_every iterations reaching
   // target_success, or a budget (0: none). The policy is evaluated as PPO trains it, sampling its
   // moves (eval_sample); greedy (the most likely move) gets stuck in loops of near-tied moves
@@ -64,6 +72,9 @@ struct PpoOptions {
     a("entropy_coef", entropy_coef);
     a("bc_coef", bc_coef);
     a("bc_batch", bc_batch);
+    a("bc_pretrain_steps", bc_pretrain_steps);
+    a("bc_pretrain_batch", bc_pretrain_batch);
+    a("critic_warmup", critic_warmup);
     a("target_success", target_success);
     a("eval_sample", eval_sample);
     a("eval_every", eval_every);
@@ -78,6 +89,8 @@ struct PpoOptions {
               "positive epoch, minibatch and batch counts");
     a.Require(learning_rate > 0 && clip > 0, "learning_rate", "a positive rate and clip");
     a.Require(eval_every > 0 && eval_episodes > 0, "eval_every", "positive evaluation counts");
+    a.Require(bc_pretrain_steps >= 0 && bc_pretrain_batch > 0 && critic_warmup >= 0,
+              "bc_pretrain_steps", "non-negative pretraining and warm-up counts");
   }
 };
 
@@ -91,6 +104,8 @@ struct PpoReport {
   std::string stopped_by;           // target | seconds | env_steps | iterations
   double update_samples_per_s = 0;  // median over this session's iterations
   int demo_steps = 0;
+  double pretrain_bc_loss = NAN;       // BC pretraining's last loss (NaN: none this session)
+  double pretrain_eval_success = NAN;  // success of the pretrained policy, before any PPO
   std::filesystem::path curve_csv, curve_svg, checkpoint;
 };
 

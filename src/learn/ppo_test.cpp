@@ -9,6 +9,7 @@
 #include "core/test_support.h"
 #include "learn/evaluate.h"
 #include "learn/policy_net.h"
+#include "learn/ppo_update.h"
 #include "learn/rollout.h"
 #include "learn/test_support.h"
 #include "learn/torch_runtime.h"
@@ -238,6 +239,89 @@ TEST(Ppo, ACheckpointOfOtherDemosUnderTheSameNameIsRefused) {
   } catch (const core::Error& e) {
     EXPECT_NE(std::string(e.what()).find("demos_content"), std::string::npos) << e.what();
   }
+}
+
+// BC alone before PPO: the imitation of the operator's demos succeeds where PPO's first iteration
+// without it does not. Its evaluation is the curve's row 0, and reaching the target there ends
+// the run before any rollout; resumed, it stays ended.
+TEST(Ppo, PretrainingOnDemosStartsPpoFromTheirImitation) {
+  PinMathThreads(1);
+  auto task = testing::ReachTask();
+  const auto dir = core::testing::TestDir("ppo_test", "pretrain");
+  InverseDistillOptions d;
+  d.rollout.episodes = 60;
+  d.rollout.threads = 2;
+  d.successes = 20;
+  std::filesystem::remove(dir / "expert.hdf5");
+  ASSERT_EQ(ExpertDemos(task, d, dir / "expert.hdf5").successes, 20);
+
+  PpoOptions o = SmallOptions();
+  o.max_iterations = 1;
+  o.target_success = 1.01;
+  const PpoReport plain =
+      TrainPpo(task, dir / "expert.hdf5", dir / "plain.pt", o, CheckpointMode::kStartOver);
+  EXPECT_TRUE(std::isnan(plain.pretrain_eval_success));
+  o.bc_pretrain_steps = 400;
+  o.critic_warmup = 1;
+  const PpoReport pre =
+      TrainPpo(task, dir / "expert.hdf5", dir / "pre.pt", o, CheckpointMode::kStartOver);
+  EXPECT_LT(plain.best_eval_success, 0.3);
+  EXPECT_GT(pre.pretrain_eval_success, 0.7) << "PPO alone: " << plain.best_eval_success;
+  const auto rows = ReadCsv(pre.curve_csv);
+  ASSERT_EQ(rows.size(), 3u);
+  EXPECT_EQ(rows[1][0], "0");
+  EXPECT_NEAR(std::stod(rows[1][4]), pre.pretrain_eval_success, 1e-5);
+  EXPECT_EQ(rows[2][7], "") << "no BC loss while the critic warms up alone";
+
+  o.target_success = 0.6;
+  const PpoReport done =
+      TrainPpo(task, dir / "expert.hdf5", dir / "done.pt", o, CheckpointMode::kStartOver);
+  EXPECT_EQ(done.stopped_by, "target");
+  EXPECT_EQ(done.iterations, 0);
+  EXPECT_DOUBLE_EQ(EvaluatePolicy(dir / "done.pt", task,
+                                  [&] {
+                                    PolicyEvalOptions e;
+                                    e.episodes = o.eval_episodes;
+                                    e.seed = o.eval_seed;
+                                    e.sample = o.eval_sample;
+                                    e.level = o.level;
+                                    return e;
+                                  }())
+                       .success_rate(),
+                   done.best_eval_success);
+  const PpoReport again = TrainPpo(task, dir / "expert.hdf5", dir / "done.pt", o);
+  EXPECT_EQ(again.resumed_from, 0);
+  EXPECT_EQ(again.iterations, 0);
+  EXPECT_EQ(again.stopped_by, "target");
+}
+
+// The critic's warm-up steps the value network and leaves the policy exactly as it was.
+TEST(Ppo, AValueOnlyMinibatchLeavesThePolicyUnchanged) {
+  PinMathThreads(1);
+  PolicyConfig config;
+  config.point_features = 0;
+  config.proprio_dim = 5;
+  config.action_dim = sim::kDiscreteActions;
+  PpoOptions o;
+  o.hidden = 16;
+  torch::manual_seed(4);
+  PpoModel model(config, o);
+  std::vector<torch::Tensor> before;
+  for (const auto& p : model.params) before.push_back(p.detach().clone());
+  const int n = 32;
+  core::Rng rng(1, 1);
+  const auto returns = torch::rand({n}) + 1;
+  const MinibatchStats first = PpoMinibatch(
+      model, o, torch::randn({n, 5}), torch::randint(0, sim::kDiscreteActions, {n}, torch::kLong),
+      torch::zeros({n}), torch::randn({n}), returns, nullptr, rng, true);
+  const std::size_t policy_params = model.policy->parameters().size();
+  for (std::size_t k = 0; k < before.size(); ++k) {
+    if (k < policy_params)
+      EXPECT_TRUE(torch::equal(before[k], model.params[k])) << "policy parameter " << k;
+    else
+      EXPECT_FALSE(torch::equal(before[k], model.params[k])) << "value parameter " << k;
+  }
+  EXPECT_GT(first.value_loss, 0);
 }
 
 }  // namespace

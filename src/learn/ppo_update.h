@@ -32,10 +32,11 @@ struct MinibatchStats {
 
 // One optimizer step on a minibatch: normalized states, actions taken, their log-likelihoods at
 // rollout time, GAE advantages (normalized here) and returns; plus, with `demos`, a BC batch of
-// options.bc_batch steps drawn with `demo_rng`.
+// options.bc_batch steps drawn with `demo_rng`. `value_only`: the value loss alone (the critic's
+// warm-up); the policy is left as it is.
 MinibatchStats PpoMinibatch(PpoModel& model, const PpoOptions& options, const torch::Tensor& obs,
                             const torch::Tensor& actions, const torch::Tensor& old_logp,
                             const torch::Tensor& advantages, const torch::Tensor& returns,
-                            const DemoSteps* demos, core::Rng& demo_rng);
+                            const DemoSteps* demos, core::Rng& demo_rng, bool value_only = false);
 
 }  // namespace twinforge::learn

@@ -63,6 +63,8 @@ struct MainJobOptions {
   double rl_bc_coef = 0.1;  // weight of the BC loss on the sim demos (RialTo's 0.1)
   int rl_envs = 64;
   int rl_eval_episodes = 100;
+  int rl_bc_pretrain_steps = 0;  // BC alone on the sim demos before PPO (learn::PpoOptions)
+  int rl_critic_warmup = 0;
   learn::DistillOptions distill;
   std::vector<int> levels = {1, 2, 3};
   int trials = 50;  // per level, for the student and the BC baseline
@@ -90,6 +92,8 @@ struct MainJobOptions {
     a("rl_bc_coef", rl_bc_coef);
     a("rl_envs", rl_envs);
     a("rl_eval_episodes", rl_eval_episodes);
+    a("rl_bc_pretrain_steps", rl_bc_pretrain_steps);
+    a("rl_critic_warmup", rl_critic_warmup);
     a("distill", distill);
     a("levels", levels);
     a("trials", trials);
@@ -101,6 +105,8 @@ struct MainJobOptions {
     a.Require(camera_frames_height > 0 && camera_frames_spread >= 0, "camera_frames_height",
               "a positive height and a non-negative spread (m)");
     a.Require(rl_bc_coef >= 0, "rl_bc_coef", "a non-negative BC weight");
+    a.Require(rl_bc_pretrain_steps >= 0 && rl_critic_warmup >= 0, "rl_bc_pretrain_steps",
+              "non-negative pretraining and warm-up counts");
     a.Require(rl_envs > 0 && threads > 0, "threads", "positive env and thread counts");
   }
 };

@@ -4,8 +4,10 @@
 
 #include <fstream>
 
+#include "core/config.h"
 #include "core/error.h"
 #include "core/fs.h"
+#include "pipeline/main_job.h"
 
 namespace twinforge::pipeline {
 namespace {
@@ -52,6 +54,20 @@ TEST(Fingerprint, ChangesWithFileContents) {
   EXPECT_EQ(before, Fingerprint().Add("cfg").AddFile(dir / "a.txt").Hex());
   core::WriteFileAtomic(dir / "a.txt", "two");
   EXPECT_NE(before, Fingerprint().Add("cfg").AddFile(dir / "a.txt").Hex());
+}
+
+// The run configurations that ship (assets/runs) are valid main-job options.
+TEST(RunConfigs, TheShippedOnesLoad) {
+  int n = 0;
+  for (const auto& e : std::filesystem::directory_iterator(TWINFORGE_ASSETS_DIR "/runs")) {
+    const MainJobOptions o = core::LoadConfig<MainJobOptions>(e.path());
+    EXPECT_FALSE(o.task.empty()) << e.path();
+    ++n;
+  }
+  EXPECT_GE(n, 2);
+  const auto mug = core::LoadConfig<MainJobOptions>(TWINFORGE_ASSETS_DIR "/runs/mug_on_shelf.json");
+  EXPECT_EQ(mug.sim_demos, "expert");
+  EXPECT_GT(mug.rl_bc_pretrain_steps, 0);
 }
 
 }  // namespace
