@@ -84,7 +84,7 @@ void AddEval(CLI::App& parent, int& exit_code) {
 
 struct RunCli {
   RealityCli reality;
-  std::string out = "runs/open_drawer", config;
+  std::string out, config;
   pipeline::MainJobOptions options;
 };
 
@@ -98,7 +98,7 @@ void AddRun(CLI::App& parent, int& exit_code) {
   cli->reality.Add(c);
   auto& o = cli->options;
   c->add_option("--task", o.task, "task name or task.yaml");
-  c->add_option("--out", cli->out, "run directory");
+  c->add_option("--out", cli->out, "run directory (default: runs/TASK)");
   c->add_option("--config", cli->config,
                 "options file (YAML/JSON; config.json of an earlier run); flags override it");
   c->add_option("--demos", o.demos, "real demos to record")->check(CLI::PositiveNumber);
@@ -134,11 +134,12 @@ void AddRun(CLI::App& parent, int& exit_code) {
         }
     }
     if (!cli->reality.address.empty()) o.reality = cli->reality.address;
-    if (o.reality.empty()) o.reality = "proxy:" + sim::LoadTaskSpec(o.task).name;
+    const std::string task_name = sim::LoadTaskSpec(o.task).name;
+    if (o.reality.empty()) o.reality = "proxy:" + task_name;
     o.token = cli->reality.token;
-    pipeline::RunMainJob(o, cli->out);
-    std::cout << nlohmann::json{{"run", cli->out}, {"report", cli->out + "/eval/report.html"}}.dump(
-                     2)
+    const std::string out = cli->out.empty() ? "runs/" + task_name : cli->out;
+    pipeline::RunMainJob(o, out);
+    std::cout << nlohmann::json{{"run", out}, {"report", out + "/eval/report.html"}}.dump(2)
               << "\n";
     exit_code = 0;
   });
