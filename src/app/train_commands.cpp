@@ -232,6 +232,8 @@ void AddRl(CLI::App& train, int& exit_code) {
         {"pretrain_bc_loss", r.pretrain_bc_loss},  // NaN is written as null
         {"pretrain_eval_success", r.pretrain_eval_success},
         {"update_samples_per_s", r.update_samples_per_s},
+        {"matmul_peak_gflops", r.matmul_peak_gflops},
+        {"update_share_of_matmul_peak", r.update_share_of_matmul_peak},
         {"curve_csv", r.curve_csv.string()},
         {"curve_svg", r.curve_svg.string()},
         {"checkpoint", r.checkpoint.string()}};

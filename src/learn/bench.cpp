@@ -34,6 +34,22 @@ double MlpFlops(const std::vector<int>& widths) {
 
 }  // namespace
 
+double MatmulPeakGflops(int repeats) {
+  torch::NoGradGuard no_grad;
+  const int n = 1024;
+  const torch::Tensor a = torch::randn({n, n}), b = torch::randn({n, n});
+  torch::Tensor c = torch::empty({n, n});
+  const double mm = MedianSeconds(repeats, [&] {
+    for (int k = 0; k < 4; ++k) torch::mm_out(c, a, b);
+  });
+  return 4 * 2.0 * n * n * double(n) / mm / 1e9;
+}
+
+double PpoSampleFlops(int state_dim, int hidden, int action_dim) {
+  return 3 * (MlpFlops({state_dim, hidden, hidden, action_dim}) +
+              MlpFlops({state_dim, hidden, hidden, 1}));
+}
+
 nlohmann::json RunLearnBench(const LearnBenchOptions& options) {
   torch::NoGradGuard outer_no_grad;
   nlohmann::json out;
@@ -42,14 +58,7 @@ nlohmann::json RunLearnBench(const LearnBenchOptions& options) {
   out["torch_threads"] = TorchThreads();
   out["repeats"] = options.repeats;
 
-  // Baseline: square single-precision matmul, the best case for the BLAS.
-  const int n = 1024;
-  const torch::Tensor a = torch::randn({n, n}), b = torch::randn({n, n});
-  torch::Tensor c = torch::empty({n, n});
-  const double mm = MedianSeconds(options.repeats, [&] {
-    for (int k = 0; k < 4; ++k) torch::mm_out(c, a, b);
-  });
-  const double peak = 4 * 2.0 * n * n * double(n) / mm / 1e9;
+  const double peak = MatmulPeakGflops(options.repeats);
   out["matmul_peak_gflops"] = peak;
 
   // PPO + BC minibatch step (TrainPpo's own code) on the teacher shape.
@@ -72,10 +81,7 @@ nlohmann::json RunLearnBench(const LearnBenchOptions& options) {
       torch::AutoGradMode grad(true);
       PpoMinibatch(model, ppo, obs, actions, old_logp, adv, returns, &demos, rng);
     });
-    // Forward of both networks, and backward at about twice the forward.
-    const double flops =
-        3 * (MlpFlops({options.state_dim, ppo.hidden, ppo.hidden, config.action_dim}) +
-             MlpFlops({options.state_dim, ppo.hidden, ppo.hidden, 1}));
+    const double flops = PpoSampleFlops(options.state_dim, ppo.hidden, config.action_dim);
     const double samples = double(B) / step;
     out["ppo_update"] = {{"minibatch", B},
                          {"state_dim", options.state_dim},

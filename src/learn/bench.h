@@ -13,6 +13,14 @@ struct LearnBenchOptions {
   int cloud_batch = 64;  // DP3-style encoder, 512 points
 };
 
+// The machine's matmul peak in GFLOP/s: the median of `repeats` runs of four square 1024
+// single-precision products, the best case for the BLAS.
+double MatmulPeakGflops(int repeats);
+
+// FLOPs of one PPO training sample through the policy and value MLPs (state -> [hidden, hidden]
+// -> actions, and -> 1): the forward pass and a backward pass of about twice the forward.
+double PpoSampleFlops(int state_dim, int hidden, int action_dim);
+
 // JSON: matmul peak (GFLOP/s), PPO update samples/s and GFLOP/s (and as a share of the peak),
 // point-cloud BC clouds/s, with the BLAS in use.
 nlohmann::json RunLearnBench(const LearnBenchOptions& options);

@@ -14,6 +14,7 @@
 #include "core/measure.h"
 #include "core/plot.h"
 #include "core/rng.h"
+#include "learn/bench.h"
 #include "learn/policy_net.h"
 #include "learn/ppo_update.h"
 #include "learn/rollout.h"
@@ -712,7 +713,13 @@ PpoReport TrainPpo(std::shared_ptr<const sim::Task> task, const std::filesystem:
   report.iterations = iteration;
   report.env_steps = env_steps;
   report.seconds = elapsed();
-  report.update_samples_per_s = core::Median(update_rates);
+  if (!update_rates.empty()) {
+    report.update_samples_per_s = core::Median(update_rates);
+    report.matmul_peak_gflops = MatmulPeakGflops(3);
+    report.update_share_of_matmul_peak =
+        report.update_samples_per_s * PpoSampleFlops(state_dim, options.hidden, config.action_dim) /
+        1e9 / report.matmul_peak_gflops;
+  }
   if (report.best_eval_success < 0) {  // no evaluation ran: keep the last weights
     SavePolicy(policy, out);
     report.best_iteration = iteration;

@@ -103,6 +103,9 @@ struct PpoReport {
   int resumed_from = 0;             // iteration of the checkpoint this session started from
   std::string stopped_by;           // target | seconds | env_steps | iterations
   double update_samples_per_s = 0;  // median over this session's iterations
+  // The same against this machine's matmul peak, measured at the end of the session (0: no
+  // update ran this session).
+  double matmul_peak_gflops = 0, update_share_of_matmul_peak = 0;
   int demo_steps = 0;
   double pretrain_bc_loss = NAN;       // BC pretraining's last loss (NaN: none this session)
   double pretrain_eval_success = NAN;  // success of the pretrained policy, before any PPO

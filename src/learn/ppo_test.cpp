@@ -75,6 +75,9 @@ TEST(Ppo, ImprovesSuccessOnATinyTask) {
   EXPECT_GT(late, 0.5) << "early " << early;
   EXPECT_GE(r.best_eval_success, 0.7);
   EXPECT_GT(r.update_samples_per_s, 0);
+  EXPECT_GT(r.matmul_peak_gflops, 1);  // measured in the same process
+  EXPECT_GT(r.update_share_of_matmul_peak, 0.001);
+  EXPECT_LT(r.update_share_of_matmul_peak, 1.5);
   EXPECT_TRUE(std::filesystem::exists(r.curve_svg));
 
   PolicyEvalOptions eval;

@@ -237,11 +237,14 @@ class Job {
                                            run_ / "policies/teacher.pt", p,
                                            learn::CheckpointMode::kResumeOrStartOver, &progress);
             progress.Finish();
-            WriteJson(run_ / "policies/teacher.json", {{"best_eval_success", r.best_eval_success},
-                                                       {"iterations", r.iterations},
-                                                       {"env_steps", r.env_steps},
-                                                       {"stopped_by", r.stopped_by},
-                                                       {"seconds", r.seconds}});
+            WriteJson(run_ / "policies/teacher.json",
+                      {{"best_eval_success", r.best_eval_success},
+                       {"iterations", r.iterations},
+                       {"env_steps", r.env_steps},
+                       {"stopped_by", r.stopped_by},
+                       {"seconds", r.seconds},
+                       {"update_samples_per_s", r.update_samples_per_s},
+                       {"update_share_of_matmul_peak", r.update_share_of_matmul_peak}});
           });
     Stage("distill",
           Fingerprint()
