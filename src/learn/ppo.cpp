@@ -365,15 +365,18 @@ MinibatchStats PpoMinibatch(PpoModel& model, const PpoOptions& options, const to
                             const torch::Tensor& advantages, const torch::Tensor& returns,
                             const DemoSteps* demos, core::Rng& demo_rng, bool value_only) {
   PolicyNet& policy = model.policy;
-  MinibatchStats stats;
-  if (value_only) {
-    const torch::Tensor v = model.value->forward(obs).view({-1});
-    const torch::Tensor value_loss = (returns - v).pow(2).mean();
+  const auto step = [&](const torch::Tensor& loss) {
     model.optimizer->zero_grad();
-    (options.value_coef * value_loss).backward();
+    loss.backward();
     torch::nn::utils::clip_grad_norm_(model.params, options.max_grad_norm);
     model.optimizer->step();
-    stats.value_loss = value_loss.item<double>();
+  };
+  MinibatchStats stats;
+  const torch::Tensor v = model.value->forward(obs).view({-1});
+  const torch::Tensor value_loss = (returns - v).pow(2).mean();
+  stats.value_loss = value_loss.item<double>();
+  if (value_only) {
+    step(options.value_coef * value_loss);
     return stats;
   }
   const torch::Tensor o = policy->ForwardNormalized({}, obs);
@@ -382,8 +385,6 @@ MinibatchStats PpoMinibatch(PpoModel& model, const PpoOptions& options, const to
   const torch::Tensor ratio = (logp - old_logp).exp();
   const torch::Tensor policy_loss =
       -torch::min(ratio * adv, ratio.clamp(1 - options.clip, 1 + options.clip) * adv).mean();
-  const torch::Tensor v = model.value->forward(obs).view({-1});
-  const torch::Tensor value_loss = (returns - v).pow(2).mean();
   const torch::Tensor entropy = Entropy(policy, o);
   torch::Tensor loss =
       policy_loss + options.value_coef * value_loss - options.entropy_coef * entropy;
@@ -393,12 +394,8 @@ MinibatchStats PpoMinibatch(PpoModel& model, const PpoOptions& options, const to
     loss = loss + options.bc_coef * bc;
     stats.bc_loss = bc.item<double>();
   }
-  model.optimizer->zero_grad();
-  loss.backward();
-  torch::nn::utils::clip_grad_norm_(model.params, options.max_grad_norm);
-  model.optimizer->step();
+  step(loss);
   stats.policy_loss = policy_loss.item<double>();
-  stats.value_loss = value_loss.item<double>();
   stats.entropy = entropy.item<double>();
   torch::NoGradGuard no_grad;
   stats.approx_kl = ((ratio - 1) - ratio.log()).mean().item<double>();
