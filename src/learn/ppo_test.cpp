@@ -46,6 +46,16 @@ PpoOptions SmallOptions() {
   return o;
 }
 
+// How TrainPpo evaluates with these options: a policy file it wrote evaluates the same again.
+PolicyEvalOptions EvalOptionsOf(const PpoOptions& o) {
+  PolicyEvalOptions e;
+  e.episodes = o.eval_episodes;
+  e.level = o.level;
+  e.seed = o.eval_seed;
+  e.sample = o.eval_sample;
+  return e;
+}
+
 // One quick iteration, for the checkpoint tests.
 PpoOptions OneIteration() {
   PpoOptions o = SmallOptions();
@@ -80,12 +90,7 @@ TEST(Ppo, ImprovesSuccessOnATinyTask) {
   EXPECT_LT(r.update_share_of_matmul_peak, 1.5);
   EXPECT_TRUE(std::filesystem::exists(r.curve_svg));
 
-  PolicyEvalOptions eval;
-  eval.episodes = o.eval_episodes;
-  eval.level = o.level;
-  eval.seed = o.eval_seed;
-  eval.sample = o.eval_sample;
-  EXPECT_DOUBLE_EQ(EvaluatePolicy(dir / "teacher.pt", task, eval).success_rate(),
+  EXPECT_DOUBLE_EQ(EvaluatePolicy(dir / "teacher.pt", task, EvalOptionsOf(o)).success_rate(),
                    r.best_eval_success);
 }
 
@@ -281,16 +286,7 @@ TEST(Ppo, PretrainingOnDemosStartsPpoFromTheirImitation) {
       TrainPpo(task, dir / "expert.hdf5", dir / "done.pt", o, CheckpointMode::kStartOver);
   EXPECT_EQ(done.stopped_by, "target");
   EXPECT_EQ(done.iterations, 0);
-  EXPECT_DOUBLE_EQ(EvaluatePolicy(dir / "done.pt", task,
-                                  [&] {
-                                    PolicyEvalOptions e;
-                                    e.episodes = o.eval_episodes;
-                                    e.seed = o.eval_seed;
-                                    e.sample = o.eval_sample;
-                                    e.level = o.level;
-                                    return e;
-                                  }())
-                       .success_rate(),
+  EXPECT_DOUBLE_EQ(EvaluatePolicy(dir / "done.pt", task, EvalOptionsOf(o)).success_rate(),
                    done.best_eval_success);
   const PpoReport again = TrainPpo(task, dir / "expert.hdf5", dir / "done.pt", o);
   EXPECT_EQ(again.resumed_from, 0);
