@@ -9,6 +9,8 @@ tf=$1
 src=$2
 d=$(mktemp -d)
 trap 'rm -rf "$d"' EXIT
+# A check or a run that fails says which, with the runs' logs (a failing run exits silently).
+trap 'echo "run_test.sh: line $LINENO failed" >&2; tail -n 20 "$d"/*.log >&2' ERR
 "$tf" run --config "$src/assets/runs/smoke.json" --out "$d/run" 2> "$d/first.log" &
 pid=$!
 # Kill once the teacher's training has started (its checkpoint is written every iteration).
