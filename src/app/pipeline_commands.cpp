@@ -13,6 +13,7 @@
 #include "pipeline/main_job.h"
 #include "pipeline/reality_eval.h"
 #include "pipeline/residual_training.h"
+#include "reality/proxy_reality.h"
 #include "sim/task.h"
 
 namespace twinforge::app {
@@ -24,6 +25,7 @@ struct EvalCli {
   std::string policy, task, out;
   std::vector<int> levels = {1, 2, 3};
   pipeline::RealityEvalOptions options;
+  bool grader_state = false;
 };
 
 // Asks the person at the robot whether the trial succeeded (a robot without an oracle).
@@ -62,20 +64,38 @@ void AddEval(CLI::App& parent, int& exit_code) {
   c->add_option("--out", cli->out,
                 "trial log (JSON lines; an existing log of the same policy is resumed)")
       ->required();
+  c->add_flag("--grader-state", cli->grader_state,
+              "proxy worlds only, to diagnose failures: run the world in this process and log its "
+              "hidden end state (task joints, objects, gripper, tool) with each trial");
   c->callback([cli, &exit_code] {
     cli->options.levels = cli->levels;
     const sim::TaskSpec task = sim::LoadTaskSpec(cli->task);
-    reality::RealityConnection connection(cli->reality.Options());
+    const std::string proxy = "proxy:";
+    std::unique_ptr<reality::ProxyReality> world;
+    std::unique_ptr<reality::RealityConnection> connection;
+    if (cli->grader_state) {
+      if (cli->reality.address.rfind(proxy, 0) != 0)
+        throw core::Error(
+            "eval --grader-state: --reality must be proxy:WORLD (a real robot's "
+            "scene has no hidden state to read), got " +
+            cli->reality.address);
+      world = std::make_unique<reality::ProxyReality>(
+          reality::ResolveWorldDir(cli->reality.address.substr(proxy.size())));
+      cli->options.grader = [w = world.get()] { return w->GraderState(); };
+    } else {
+      connection = std::make_unique<reality::RealityConnection>(cli->reality.Options());
+    }
+    reality::Robot& robot = world ? static_cast<reality::Robot&>(*world) : connection->robot();
     core::Progress progress("eval", int64_t(cli->levels.size()) * cli->options.trials, "trials");
     const pipeline::RealityEvalReport r = pipeline::EvaluateOnReality(
-        connection.robot(), cli->policy, task, cli->options, cli->out,
+        robot, cli->policy, task, cli->options, cli->out,
         ::isatty(STDIN_FILENO) ? pipeline::SuccessJudge(AskPerson) : nullptr, &progress);
     progress.Finish();
     nlohmann::json report = pipeline::ToJson(r);
     report["policy"] = cli->policy;
     if (!cli->options.residual.empty()) report["residual"] = cli->options.residual;
     report["task"] = task.name;
-    report["reality"] = connection.address();
+    report["reality"] = connection ? connection->address() : cli->reality.address;
     report["log"] = cli->out;
     std::cout << report.dump(2) << "\n";
     exit_code = 0;

@@ -54,4 +54,15 @@ if grep -q "rl: resuming" "$d/fourth.log"; then
   echo "rl resumed a checkpoint made from other sim demos" >&2
   exit 1
 fi
+# Diagnosis on a proxy world: each trial's line carries the world's hidden end state. A real
+# robot's address is refused: it has none to read.
+"$tf" eval --policy "$d/run/policies/student.pt" --task open_drawer --reality proxy:open_drawer \
+  --levels 1 --trials 2 --grader-state --out "$d/graded.jsonl" > /dev/null 2> "$d/graded.log"
+[ "$(grep -c '"grader":{.*"drawer_slide":' "$d/graded.jsonl")" -eq 2 ]
+if "$tf" eval --policy "$d/run/policies/student.pt" --task open_drawer \
+  --reality tcp://127.0.0.1:9 --grader-state --out "$d/refused.jsonl" 2> "$d/refused.log"; then
+  echo "--grader-state accepted a real robot's address" >&2
+  exit 1
+fi
+grep -q "must be proxy:WORLD" "$d/refused.log"
 echo ALL-GOOD

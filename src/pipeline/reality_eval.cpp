@@ -49,8 +49,10 @@ std::pair<double, double> BootstrapInterval(int successes, int trials, int resam
 namespace {
 
 nlohmann::json ToJson(const TrialRecord& t) {
-  return {{"level", t.level},     {"trial", t.trial}, {"seed", t.seed},
-          {"success", t.success}, {"steps", t.steps}, {"seconds", t.seconds}};
+  nlohmann::json j = {{"level", t.level},     {"trial", t.trial}, {"seed", t.seed},
+                      {"success", t.success}, {"steps", t.steps}, {"seconds", t.seconds}};
+  if (!t.grader.is_null()) j["grader"] = t.grader;
+  return j;
 }
 
 }  // namespace
@@ -107,8 +109,13 @@ RealityEvalReport EvaluateOnReality(reality::Robot& robot, const std::filesystem
                      log.string(), n);
         break;
       }
-      TrialRecord r{t.at("level"),   t.at("trial"), t.at("seed"),
-                    t.at("success"), t.at("steps"), t.at("seconds")};
+      TrialRecord r{t.at("level"),
+                    t.at("trial"),
+                    t.at("seed"),
+                    t.at("success"),
+                    t.at("steps"),
+                    t.at("seconds"),
+                    t.value("grader", nlohmann::json())};
       done[{r.level, r.trial}] = r;
     }
   } else {
@@ -147,6 +154,7 @@ RealityEvalReport EvaluateOnReality(reality::Robot& robot, const std::filesystem
                         ? (judge ? judge(r) : false)
                         : answer == reality::SuccessAnswer::kSuccess;
         r.seconds = core::SecondsSince(trial_start);
+        if (options.grader) r.grader = options.grader();
         if (!options.frames.empty() && !shown[r.success] && !o.frames.empty() &&
             !o.frames.front().rgb.empty()) {
           shown[r.success] = true;

@@ -36,6 +36,9 @@ struct RealityEvalOptions {
   std::filesystem::path frames;
   // If set: a residual (`train residual`) adds its correction to the policy's actions.
   std::filesystem::path residual;
+  // If set: a grader's view of the scene at each trial's end (a proxy world's hidden state),
+  // logged with the trial as "grader". Diagnosis only; the policy never sees it.
+  std::function<nlohmann::json()> grader;
 };
 
 struct TrialRecord {
@@ -44,6 +47,7 @@ struct TrialRecord {
   bool success = false;
   int steps = 0;  // actions sent
   double seconds = 0;
+  nlohmann::json grader;  // RealityEvalOptions::grader's answer, if asked
 };
 
 struct LevelResult {

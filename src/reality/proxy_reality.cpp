@@ -215,4 +215,22 @@ SuccessAnswer ProxyReality::QuerySuccess() {
   return env_->Success() ? SuccessAnswer::kSuccess : SuccessAnswer::kFailure;
 }
 
+nlohmann::json ProxyReality::GraderState() const {
+  const mjModel* m = env_->model();
+  const mjData* d = env_->data();
+  const auto& spec = task_->spec();
+  const auto& index = task_->index();
+  const core::Pose to_base = env_->base().Inverse();
+  auto xyz = [](const Eigen::Vector3d& v) { return nlohmann::json{v.x(), v.y(), v.z()}; };
+  nlohmann::json joints = nlohmann::json::object(), objects = nlohmann::json::object();
+  for (size_t k = 0; k < index.state_joints.size(); ++k)
+    joints[spec.joints[k]] = d->qpos[m->jnt_qposadr[index.state_joints[k]]];
+  for (size_t k = 0; k < index.object_bodies.size(); ++k)
+    objects[spec.objects[k]] = xyz(to_base * Eigen::Vector3d(d->xpos + 3 * index.object_bodies[k]));
+  return {{"joints", joints},
+          {"objects", objects},
+          {"gripper", env_->FingerOpening()},
+          {"tool", xyz(env_->EePose().translation)}};
+}
+
 }  // namespace twinforge::reality
