@@ -203,9 +203,18 @@ class Job {
                                               {"success_rate", r.success_rate()},
                                               {"seconds", r.seconds}});
         });
+    // The teacher trains, and is distilled, in the twin with its physics randomized (if asked).
+    const std::string physics = core::ToJson(o_.physics).dump();
+    auto train_task = twin_task;
+    if (o_.physics.enabled()) {
+      sim::TaskSpec spec = twin_task->spec();
+      spec.randomization.physics = o_.physics;
+      train_task = std::make_shared<const sim::Task>(spec);
+    }
     Stage("rl",
           Fingerprint()
               .Add(twin_hash)
+              .Add(physics)
               .AddFile(run_ / "demos/sim.hdf5")
               .Add(std::to_string(o_.rl_envs) + "/" + std::to_string(o_.seed) + "/" +
                    std::to_string(o_.rl_bc_coef))
@@ -233,7 +242,7 @@ class Job {
             // A checkpoint left by a killed run (or a smaller budget) resumes; one made from
             // other inputs (new sim demos, a rebuilt twin) is set aside and the teacher starts
             // over.
-            const auto r = learn::TrainPpo(twin_task, demos ? run_ / "demos/sim.hdf5" : "",
+            const auto r = learn::TrainPpo(train_task, demos ? run_ / "demos/sim.hdf5" : "",
                                            run_ / "policies/teacher.pt", p,
                                            learn::CheckpointMode::kResumeOrStartOver, &progress);
             progress.Finish();
@@ -249,6 +258,7 @@ class Job {
     Stage("distill",
           Fingerprint()
               .Add(twin_hash)
+              .Add(physics)
               .AddFile(run_ / "policies/teacher.pt")
               .AddFile(run_ / "demos/real.hdf5")
               .Add(core::ToJson(o_.distill).dump())
@@ -258,7 +268,7 @@ class Job {
             d.threads = o_.threads;
             if (!discrete) d.teacher_sample = d.student_sample = false;  // mean actions, as above
             core::Progress progress("distill", 3 + d.dagger_rounds, "stages");
-            learn::TrainDistill(run_ / "policies/teacher.pt", twin_task, run_ / "demos/real.hdf5",
+            learn::TrainDistill(run_ / "policies/teacher.pt", train_task, run_ / "demos/real.hdf5",
                                 run_ / "policies/student.pt", d, &progress);
             progress.Finish();
           });

@@ -25,6 +25,7 @@
 #include "learn/distill.h"
 #include "real2sim/calibrate/calibrate.h"
 #include "reality/scan.h"
+#include "sim/task.h"
 
 namespace twinforge::pipeline {
 
@@ -65,6 +66,10 @@ struct MainJobOptions {
   int rl_eval_episodes = 100;
   int rl_bc_pretrain_steps = 0;  // BC alone on the sim demos before PPO (learn::PpoOptions)
   int rl_critic_warmup = 0;
+  // Scene physics drawn per episode in the twin while the teacher trains and is distilled
+  // (sim::PhysicsRandomization; off unless `from_level` <= 3): the recipe's masses, frictions
+  // and damping are guesses, and the real gripper's force may not be the model's.
+  sim::PhysicsRandomization physics;
   learn::DistillOptions distill;
   std::vector<int> levels = {1, 2, 3};
   int trials = 50;  // per level, for the student and the BC baseline
@@ -94,6 +99,7 @@ struct MainJobOptions {
     a("rl_eval_episodes", rl_eval_episodes);
     a("rl_bc_pretrain_steps", rl_bc_pretrain_steps);
     a("rl_critic_warmup", rl_critic_warmup);
+    a("physics", physics);
     a("distill", distill);
     a("levels", levels);
     a("trials", trials);

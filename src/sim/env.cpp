@@ -59,6 +59,7 @@ void Env::RestoreNominalModel() {
   CopyArray(m->dof_frictionloss, n->dof_frictionloss, m->nv);
   CopyArray(m->actuator_gainprm, n->actuator_gainprm, mjNGAIN * m->nu);
   CopyArray(m->actuator_biasprm, n->actuator_biasprm, mjNBIAS * m->nu);
+  CopyArray(m->actuator_forcerange, n->actuator_forcerange, 2 * m->nu);
 }
 
 void Env::Reset(uint64_t seed, int level) {
@@ -202,6 +203,8 @@ void Env::RandomizePhysics() {
   const double mass = rng_.Uniform(p.mass[0], p.mass[1]);
   const double damping = rng_.Uniform(p.damping[0], p.damping[1]);
   const double gain = rng_.Uniform(p.actuator_gain[0], p.actuator_gain[1]);
+  const double frictionloss = rng_.Uniform(p.frictionloss[0], p.frictionloss[1]);
+  const double grip_force = rng_.Uniform(p.grip_force[0], p.grip_force[1]);
   for (int g = 0; g < m->ngeom; ++g)
     if (!InSubtree(m, m->geom_bodyid[g], mount)) m->geom_friction[3 * g] *= friction;
   for (int b = 1; b < m->nbody; ++b)
@@ -210,10 +213,17 @@ void Env::RandomizePhysics() {
       for (int c = 0; c < 3; ++c) m->body_inertia[3 * b + c] *= mass;
     }
   for (int v = 0; v < m->nv; ++v)
-    if (!InSubtree(m, m->dof_bodyid[v], mount)) m->dof_damping[v] *= damping;
+    if (!InSubtree(m, m->dof_bodyid[v], mount)) {
+      m->dof_damping[v] *= damping;
+      m->dof_frictionloss[v] *= frictionloss;
+    }
   for (int a = 0; a < m->nu; ++a) {
     m->actuator_gainprm[mjNGAIN * a] *= gain;
     m->actuator_biasprm[mjNBIAS * a + 1] *= gain;
+  }
+  for (int a : task_->index().robot.finger_actuator) {
+    m->actuator_forcerange[2 * a] *= grip_force;
+    m->actuator_forcerange[2 * a + 1] *= grip_force;
   }
 }
 

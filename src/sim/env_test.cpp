@@ -2,10 +2,12 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 
 #include "core/error.h"
+#include "sim/expert.h"
 
 namespace twinforge::sim {
 namespace {
@@ -49,6 +51,72 @@ TEST(Env, ArmTracksADiscreteMoveWithinOneControlPeriod) {
     EXPECT_LT(core::AngleBetween(after.rotation, target.rotation), 0.03)
         << DiscreteActionName(action);
   }
+}
+
+std::shared_ptr<const Task> DrawerWithPhysics(const PhysicsRandomization& physics) {
+  TaskSpec spec = LoadTaskSpec("open_drawer");
+  spec.randomization.physics = physics;
+  return std::make_shared<const Task>(spec);
+}
+
+// Each episode draws its own scene physics within the ranges; the robot keeps its own; a level
+// below `from_level` (and the next Reset) is the nominal model again.
+TEST(Env, PhysicsRandomizationScalesTheSceneNotTheRobot) {
+  PhysicsRandomization p;
+  p.from_level = 1;
+  p.damping = {1.5, 2.0};
+  p.frictionloss = {0.5, 0.7};
+  p.mass = {1.2, 1.4};
+  p.grip_force = {0.4, 0.6};
+  const auto task = DrawerWithPhysics(p);
+  const mjModel* nominal = task->model();
+  const int slide = task->index().state_joints.at(0);
+  const int dof = nominal->jnt_dofadr[slide];
+  const int drawer = nominal->jnt_bodyid[slide];
+  const int finger = task->index().robot.finger_actuator[0];
+  const int arm_dof = task->index().robot.arm_dof[0];
+  Env env(task);
+  std::vector<double> dampings;
+  for (uint64_t seed = 1; seed <= 6; ++seed) {
+    env.Reset(seed, 1);
+    const mjModel* m = env.model();
+    const double damping = m->dof_damping[dof] / nominal->dof_damping[dof];
+    EXPECT_GE(damping, 1.5 - 1e-9);
+    EXPECT_LE(damping, 2.0 + 1e-9);
+    const double loss = m->dof_frictionloss[dof] / nominal->dof_frictionloss[dof];
+    EXPECT_GE(loss, 0.5 - 1e-9);
+    EXPECT_LE(loss, 0.7 + 1e-9);
+    const double mass = m->body_mass[drawer] / nominal->body_mass[drawer];
+    EXPECT_GE(mass, 1.2 - 1e-9);
+    EXPECT_LE(mass, 1.4 + 1e-9);
+    const double grip =
+        m->actuator_forcerange[2 * finger + 1] / nominal->actuator_forcerange[2 * finger + 1];
+    EXPECT_GE(grip, 0.4 - 1e-9);
+    EXPECT_LE(grip, 0.6 + 1e-9);
+    EXPECT_EQ(m->dof_damping[arm_dof], nominal->dof_damping[arm_dof]);
+    dampings.push_back(damping);
+  }
+  EXPECT_GT(*std::max_element(dampings.begin(), dampings.end()) -
+                *std::min_element(dampings.begin(), dampings.end()),
+            0.1);
+  env.Reset(1, 0);
+  EXPECT_EQ(env.model()->dof_damping[dof], nominal->dof_damping[dof]);
+  EXPECT_EQ(env.model()->actuator_forcerange[2 * finger + 1],
+            nominal->actuator_forcerange[2 * finger + 1]);
+}
+
+// What the ranges do: the scripted expert's fingers straddle the drawer's bar, so the pull holds
+// with a third of their force even on a drawer four times as stiff (20 of 20, measured); with a
+// tenth of it on that drawer, the bar pushes the fingers apart and the expert mostly fails.
+TEST(Env, AWeakGripOnAStiffDrawerSlipsAndTheExpertFails) {
+  PhysicsRandomization p;
+  p.from_level = 1;
+  p.damping = p.frictionloss = {4, 4};
+  p.grip_force = {0.1, 0.1};
+  const auto nominal = EvaluateExpert(DrawerTask(), 20, 1, 7, 0.0, 2);
+  const auto weak = EvaluateExpert(DrawerWithPhysics(p), 20, 1, 7, 0.0, 2);
+  EXPECT_GE(nominal.successes, 18);
+  EXPECT_LE(weak.successes, 10) << "nominal " << nominal.successes;
 }
 
 }  // namespace

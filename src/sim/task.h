@@ -9,6 +9,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "sim/action.h"
@@ -113,10 +114,16 @@ struct DisturbanceSpec {
   }
 };
 
-// Optional physics randomization, as scale factors on the nominal model.
+// Optional physics randomization, as scale factors on the nominal model, one draw of each per
+// episode: `friction` on the scene's geoms' sliding friction, `mass` on its bodies' masses (and
+// inertias), `damping` and `frictionloss` on its joints' damping and dry friction,
+// `actuator_gain` on every actuator's stiffness, `grip_force` on the fingers' force limit. The
+// robot's own links, joints and geoms keep their values (sysid measures those).
 struct PhysicsRandomization {
   int from_level = 4;  // applied at this level and above (4 = never)
   Range friction{1, 1}, mass{1, 1}, damping{1, 1}, actuator_gain{1, 1};
+  Range frictionloss{1, 1}, grip_force{1, 1};
+  bool enabled() const { return from_level <= 3; }
   template <class A>
   void Serialize(A& a) {
     a("from_level", from_level);
@@ -124,6 +131,16 @@ struct PhysicsRandomization {
     a("mass", mass);
     a("damping", damping);
     a("actuator_gain", actuator_gain);
+    a("frictionloss", frictionloss);
+    a("grip_force", grip_force);
+    a.Require(from_level >= 0 && from_level <= 4, "from_level",
+              "a randomization level 0..3, or 4 for never");
+    const std::pair<const char*, const Range*> ranges[] = {
+        {"friction", &friction},         {"mass", &mass},
+        {"damping", &damping},           {"actuator_gain", &actuator_gain},
+        {"frictionloss", &frictionloss}, {"grip_force", &grip_force}};
+    for (const auto& [key, r] : ranges)
+      a.Require((*r)[0] > 0 && (*r)[0] <= (*r)[1], key, "a scale range [min, max], 0 < min <= max");
   }
 };
 
