@@ -147,6 +147,7 @@ DistillCollection CollectDistill(PolicyNet& teacher, PolicyNet* actor,
     cloud_options.scene_points = options.scene_points;
     cloud_options.arm_points = options.arm_points;
     cloud_options.rendered = options.rendered;
+    cloud_options.noise = task->spec().camera.noise;  // the real sensor's, if calibrated
     sim::CloudMaker clouds(*task, env.model(), cloud_options);
     std::vector<float> scene(3 * options.scene_points), arm(3 * options.arm_points);
     std::vector<float> state(state_dim), proprio(sim::kProprioDim);

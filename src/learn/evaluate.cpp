@@ -141,6 +141,7 @@ std::vector<PolicyEpisode> RunPolicyEpisodes(PolicyNet& net, std::shared_ptr<con
       sim::CloudMaker::Options cloud_options;
       cloud_options.scene_points = options.scene_points;
       cloud_options.arm_points = options.arm_points;
+      cloud_options.noise = task->spec().camera.noise;  // the real sensor's, if calibrated
       clouds = std::make_unique<sim::CloudMaker>(*task, env.model(), cloud_options);
     }
     std::vector<float> scene(3 * options.scene_points), arm(3 * options.arm_points);

@@ -20,7 +20,7 @@ class FrameCloud {
   struct Options {
     int scene_points = 2048;
     int arm_points = 512;
-    double arm_margin = 0.03;  // m: depth this close to (or behind) the arm's surface is the arm
+    double arm_margin = sim::kArmDepthMargin;  // m: depth this close to (or behind) the arm
   };
   // `camera_correction`: the camera's calibration (sim::CameraSpec::correction as a pose): a
   // frame's reported extrinsics are composed with it before back-projecting.

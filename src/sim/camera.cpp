@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "core/error.h"
+#include "sim/robot_mask.h"
 
 namespace twinforge::sim {
 
@@ -151,13 +152,34 @@ void RayCaster::Render(const mjModel* m, const mjData* d, const core::Pose& base
   }
 }
 
-void AddDepthNoise(float* depth, int count, const DepthNoise& noise, core::Rng& rng) {
-  if (noise.sigma0 <= 0 && noise.sigma_z2 <= 0) return;
+void AddDepthNoise(float* depth, int width, int height, const DepthNoise& noise, core::Rng& rng) {
+  if (noise.off()) return;
+  const int count = width * height;
+  std::vector<uint8_t> edge(count, 0);
+  if (noise.edge_dropout > 0) {
+    const float jump = static_cast<float>(noise.edge_jump);
+    auto differs = [&](int i, int j) {
+      return depth[j] <= 0 || std::abs(depth[j] - depth[i]) > jump;
+    };
+    for (int v = 0; v < height; ++v)
+      for (int u = 0; u < width; ++u) {
+        const int i = v * width + u;
+        if (depth[i] <= 0) continue;
+        edge[i] = (u > 0 && differs(i, i - 1)) || (u + 1 < width && differs(i, i + 1)) ||
+                  (v > 0 && differs(i, i - width)) || (v + 1 < height && differs(i, i + width));
+      }
+  }
   for (int i = 0; i < count; ++i) {
     if (depth[i] <= 0) continue;
-    const double z = depth[i];
-    depth[i] = static_cast<float>(
-        std::max(0.0, z + rng.Normal() * (noise.sigma0 + noise.sigma_z2 * z * z)));
+    const double lose = edge[i] ? noise.edge_dropout : noise.dropout;
+    if (lose > 0 && rng.Uniform() < lose) {
+      depth[i] = 0;
+      continue;
+    }
+    double z = depth[i];
+    z += rng.Normal() * (noise.sigma0 + noise.sigma_z2 * z * z);
+    if (noise.quantization > 0) z = noise.quantization * std::round(z / noise.quantization);
+    depth[i] = static_cast<float>(std::max(0.0, z));
   }
 }
 
@@ -295,19 +317,28 @@ CloudMaker::CloudMaker(const Task& task, const mjModel* m, const Options& option
       workspace_(MakeWorkspace(task.spec().workspace)),
       caster_(MakeCamera(task.spec().camera), m),
       scene_sampler_(m, ~(1u << kRobotGeomGroup)),
-      arm_sampler_(m, 1u << kRobotGeomGroup) {
+      arm_sampler_(m, 1u << kRobotGeomGroup),
+      robot_(task.index().robot),
+      mask_(options.rendered ? std::make_unique<RobotMask>(task.robot()) : nullptr) {
   const auto& k = caster_.camera().intrinsics;
   depth_.resize(k.width * k.height);
   scratch_.resize(
       3 * std::max({k.width * k.height, scene_sampler_.capacity(), arm_sampler_.capacity()}));
 }
 
+CloudMaker::~CloudMaker() = default;
+
 void CloudMaker::Make(const mjModel* m, const mjData* d, const core::Pose& base, core::Rng& rng,
                       float* scene, float* arm) {
   int n = 0;
   if (options_.rendered) {
     caster_.Render(m, d, base, depth_.data(), nullptr);
-    AddDepthNoise(depth_.data(), static_cast<int>(depth_.size()), options_.noise, rng);
+    const auto& k = caster_.camera().intrinsics;
+    AddDepthNoise(depth_.data(), k.width, k.height, options_.noise, rng);
+    ArmVector q;
+    for (int j = 0; j < kArmDof; ++j) q[j] = d->qpos[robot_.arm_qpos[j]];
+    mask_->Pose(q, d->qpos[robot_.finger_qpos[0]] + d->qpos[robot_.finger_qpos[1]]);
+    mask_->Remove(caster_.camera(), depth_, kArmDepthMargin, kArmGrowPixels);
     n = DepthToPoints(caster_.camera(), depth_.data(), workspace_, scratch_.data());
   } else {
     n = scene_sampler_.Transform(m, d, base, workspace_, scratch_.data());

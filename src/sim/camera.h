@@ -9,6 +9,7 @@
 #include <array>
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <vector>
 
 #include "core/pinhole.h"
@@ -45,12 +46,6 @@ struct Workspace {
 };
 Workspace MakeWorkspace(const WorkspaceSpec& spec);
 
-// Depth noise of a structured-light sensor: sigma = sigma0 + sigma_z2 * z^2 (metres).
-struct DepthNoise {
-  double sigma0 = 0.0;
-  double sigma_z2 = 0.0;
-};
-
 // Geom groups seen by cameras and samplers. The robot's geoms are in group 1.
 constexpr int kRobotGeomGroup = 1;
 
@@ -77,8 +72,11 @@ class RayCaster {
   std::vector<double> z_scale_;     // optical-axis component of each ray
 };
 
-// Adds noise to a depth image in place (pixels with no return stay 0).
-void AddDepthNoise(float* depth, int count, const DepthNoise& noise, core::Rng& rng);
+// Applies a sensor's noise (DepthNoise, in sim/task.h) to a width x height depth image in place:
+// edge pixels (found on the image as given) and others lose their return with their
+// probabilities, then the returns get Gaussian noise and are quantized. Pixels with no return
+// stay 0. Draws nothing from `rng` when the noise is off.
+void AddDepthNoise(float* depth, int width, int height, const DepthNoise& noise, core::Rng& rng);
 
 // Back-projects a depth image into base-frame points inside `workspace`; writes up to
 // width*height points to xyz and returns how many.
@@ -113,17 +111,31 @@ class SurfaceSampler {
 void ResamplePoints(const float* points, int n, int count, core::Rng& rng, float* out,
                     int stride = 3);
 
+class RobotMask;
+
+// What a real frame loses to the arm (reality::FrameCloud, sim::RobotMask::Remove): the arm's
+// silhouette grown by this many pixels, and there everything behind the arm or less than this
+// margin in front of it.
+constexpr double kArmDepthMargin = 0.03;  // m
+constexpr int kArmGrowPixels = 2;
+
 // Everything needed to turn an env's state into the clouds a policy sees, with buffers
-// allocated once. Not thread-safe: one per worker.
+// allocated once: the same two clouds reality::FrameCloud makes from a real frame. Not
+// thread-safe: one per worker.
 class CloudMaker {
  public:
   struct Options {
     int scene_points = 6000;
     int arm_points = 3000;
-    bool rendered = true;  // ray-cast depth (else synthetic samples)
+    // Ray-cast depth of the scene (else synthetic samples on its surfaces). As on a real frame,
+    // the sensor's noise is applied and the arm's pixels are cut out (the arm hides what is
+    // behind it and the cut takes a margin around it), so the gripper's surroundings look as
+    // they do on the robot.
+    bool rendered = true;
     DepthNoise noise;
   };
   CloudMaker(const Task& task, const mjModel* m, const Options& options);
+  ~CloudMaker();
 
   // Fills scene[scene_points*3] and arm[arm_points*3] (base frame, workspace-cropped).
   void Make(const mjModel* m, const mjData* d, const core::Pose& base, core::Rng& rng, float* scene,
@@ -136,6 +148,8 @@ class CloudMaker {
   Workspace workspace_;
   RayCaster caster_;
   SurfaceSampler scene_sampler_, arm_sampler_;
+  RobotIndex robot_;                 // in the env's model
+  std::unique_ptr<RobotMask> mask_;  // the robot alone, to cut out of rendered depth
   std::vector<float> depth_, scratch_;
 };
 

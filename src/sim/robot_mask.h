@@ -22,7 +22,8 @@ class RobotMask {
   // `margin` of, the measured depth. The robot's silhouette is grown by `grow` pixels first: a
   // camera a few mm off its reported pose sees the robot's edges a pixel or two away, and those
   // slivers would otherwise pile up into ghost surfaces in a fused scan. Returns how many.
-  int Remove(const Camera& camera, std::vector<float>& depth, double margin, int grow = 2);
+  int Remove(const Camera& camera, std::vector<float>& depth, double margin,
+             int grow = kArmGrowPixels);
   // Points on the posed robot inside `workspace` (base frame); see SurfaceSampler::Transform.
   int Surface(const Workspace& workspace, float* xyz) const;
   int surface_capacity() const { return sampler_.capacity(); }

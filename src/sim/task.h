@@ -240,6 +240,36 @@ struct ExpertSpec {
   }
 };
 
+// A depth sensor's noise: sigma = sigma0 + sigma_z2 * z^2 (m) on each return, returns lost at
+// depth edges (a 4-neighbour `edge_jump` nearer or farther, or with no return) with probability
+// `edge_dropout` and elsewhere with `dropout`, and depth reported in steps of `quantization`.
+// `twinforge calibrate` measures it on the real camera's frames against the twin.
+struct DepthNoise {
+  double sigma0 = 0.0;
+  double sigma_z2 = 0.0;
+  double edge_jump = 0.02;
+  double edge_dropout = 0.0;
+  double dropout = 0.0;
+  double quantization = 0.0;
+  bool off() const {
+    return sigma0 <= 0 && sigma_z2 <= 0 && edge_dropout <= 0 && dropout <= 0 && quantization <= 0;
+  }
+  template <class A>
+  void Serialize(A& a) {
+    a("sigma0", sigma0);
+    a("sigma_z2", sigma_z2);
+    a("edge_jump", edge_jump);
+    a("edge_dropout", edge_dropout);
+    a("dropout", dropout);
+    a("quantization", quantization);
+    a.Require(sigma0 >= 0 && sigma_z2 >= 0 && quantization >= 0, "sigma0",
+              "non-negative noise and quantization (m)");
+    a.Require(edge_dropout >= 0 && edge_dropout <= 1 && dropout >= 0 && dropout <= 1, "dropout",
+              "probabilities in [0, 1]");
+    a.Require(edge_jump > 0, "edge_jump", "a positive depth step (m)");
+  }
+};
+
 struct CameraSpec {
   std::string name = "front";
   std::array<double, 3> position{1.1, 0.0, 0.75};  // robot base frame
@@ -250,9 +280,11 @@ struct CameraSpec {
   // vector then translation (rad, m) in the camera's own frame (OpenCV axes). A real frame's
   // reported extrinsics are corrected by the same (reality::FrameCloud).
   std::array<double, 6> correction{0, 0, 0, 0, 0, 0};
+  DepthNoise noise;  // the real sensor's, as calibration measured it (none by default)
   template <class A>
   void Serialize(A& a) {
     a("name", name);
+    a("noise", noise);
     a("position", position);
     a("look_at", look_at);
     a("fovy_deg", fovy_deg);

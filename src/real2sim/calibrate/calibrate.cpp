@@ -7,7 +7,9 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <vector>
 
+#include "core/config.h"
 #include "core/error.h"
 #include "core/fs.h"
 #include "core/image.h"
@@ -117,6 +119,69 @@ FrameFit Fit(const RealFrame& frame, const core::Pose& pose, double outlier) {
   fit.inliers = returns > 0 ? static_cast<double>(close.size(0)) / returns : 0;
   fit.median_depth_error = close.size(0) > 0 ? close.median().item<double>() : outlier;
   return fit;
+}
+
+// The real sensor's noise, from the frames against the twin seen from the calibrated pose:
+// where the twin shows a surface, the share of pixels with no return at the twin's depth edges
+// and elsewhere; and the spread of the depth step between horizontal neighbours inside
+// surfaces, less the twin's own step there (what is left is the two pixels' noise, sqrt(2)
+// sigma; a robust spread, so that the scan's own errors count little).
+sim::DepthNoise EstimateNoise(const std::vector<RealFrame>& frames, const core::Pose& correction,
+                              double outlier) {
+  torch::NoGradGuard no_grad;
+  sim::DepthNoise noise;
+  int64_t edges = 0, edges_lost = 0, inside = 0, inside_lost = 0;
+  std::vector<double> steps;
+  for (const RealFrame& f : frames) {
+    SoftRasterOptions sharp;
+    sharp.sigma = 0.3;
+    const SoftImage image =
+        SoftRasterize(f.twin, f.intrinsics, ToTensor(f.reported * correction), sharp);
+    const int w = f.intrinsics.width, h = f.intrinsics.height;
+    const torch::Tensor twin_depth = image.depth.contiguous(),
+                        silhouette = image.silhouette.contiguous();
+    const auto twin = twin_depth.accessor<double, 2>();
+    const auto shown = silhouette.accessor<double, 2>();
+    const auto real = f.depth.accessor<double, 2>();
+    auto surface = [&](int r, int c) { return shown[r][c] > 0.5 && twin[r][c] > 0; };
+    auto edge = [&](int r, int c) {
+      const int dr[] = {-1, 1, 0, 0}, dc[] = {0, 0, -1, 1};
+      for (int k = 0; k < 4; ++k) {
+        const int rr = r + dr[k], cc = c + dc[k];
+        if (rr < 0 || rr >= h || cc < 0 || cc >= w) continue;
+        if (!surface(rr, cc) || std::abs(twin[rr][cc] - twin[r][c]) > noise.edge_jump) return true;
+      }
+      return false;
+    };
+    for (int r = 0; r < h; ++r)
+      for (int c = 0; c < w; ++c) {
+        if (!surface(r, c)) continue;
+        const bool lost = real[r][c] <= 0;
+        if (edge(r, c)) {
+          ++edges;
+          edges_lost += lost;
+          continue;
+        }
+        ++inside;
+        inside_lost += lost;
+        if (c + 1 < w && surface(r, c + 1) && !edge(r, c + 1) && !lost && real[r][c + 1] > 0 &&
+            std::abs(real[r][c] - twin[r][c]) < outlier &&
+            std::abs(real[r][c + 1] - twin[r][c + 1]) < outlier)
+          steps.push_back((real[r][c + 1] - real[r][c]) - (twin[r][c + 1] - twin[r][c]));
+      }
+  }
+  if (edges > 0) noise.edge_dropout = double(edges_lost) / edges;
+  if (inside > 0) noise.dropout = double(inside_lost) / inside;
+  if (steps.size() >= 10) {
+    auto median = [](std::vector<double> v) {
+      std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+      return v[v.size() / 2];
+    };
+    const double centre = median(steps);
+    for (double& d : steps) d = std::abs(d - centre);
+    noise.sigma0 = 1.4826 * median(steps) / std::sqrt(2.0);
+  }
+  return noise;
 }
 
 // Open3D point-to-plane ICP of the real clouds (from the reported pose) onto the twin's surface:
@@ -394,6 +459,7 @@ CameraCalibration CalibrateCamera(const sim::TaskSpec& twin_task, const core::Sc
     out.after.push_back(Fit(f, f.reported * out.correction, options.outlier));
     out.icp.push_back(Fit(f, f.reported * out.icp_correction, options.outlier));
   }
+  out.noise = EstimateNoise(frames, out.correction, options.outlier);
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return out;
 }
@@ -416,6 +482,7 @@ nlohmann::json ToJson(const CameraCalibration& c) {
           {"frames_before", ToJson(c.before)},
           {"frames_after", ToJson(c.after)},
           {"frames_icp", ToJson(c.icp)},
+          {"depth_noise", core::ToJson(c.noise)},
           {"loss_first", c.loss.empty() ? 0.0 : c.loss.front()},
           {"loss_last", c.loss.empty() ? 0.0 : c.loss.back()},
           {"steps", c.loss.size()},
@@ -432,6 +499,7 @@ void WriteCalibratedTwin(const std::filesystem::path& twin_dir, const core::Scan
   fs::copy(twin_dir, out, fs::copy_options::recursive | fs::copy_options::overwrite_existing);
   sim::TaskSpec task = sim::LoadTaskSpec((out / "task.yaml").string());
   task.camera.correction = sim::CorrectionArray(calibration.correction);
+  task.camera.noise = calibration.noise;
   WriteTwinTask(task, out);
 
   // Before/after images: real colour | twin before | twin after | depth error before | after

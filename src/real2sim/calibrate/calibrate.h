@@ -103,6 +103,10 @@ struct CameraCalibration {
   core::Pose icp_correction;  // the same found by Open3D's point-to-plane ICP (the baseline)
   std::vector<FrameFit> before, after, icp;  // per frame
   std::vector<double> loss;                  // per step
+  // The real depth sensor's noise, measured on the frames against the twin from the calibrated
+  // pose (returns lost at the twin's depth edges and elsewhere, and the depth's spread). The
+  // calibrated twin's camera carries it, so its rendered clouds look like the real ones.
+  sim::DepthNoise noise;
   double seconds = 0;
 };
 

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include "core/config.h"
 #include "core/error.h"
 #include "core/image.h"
 #include "core/test_support.h"
@@ -58,6 +59,10 @@ TEST(CalibrateCamera, BringsTheTwinOntoTheFramesAndWritesTheCorrectedTwin) {
   const core::Pose expected = sim::MakeCamera(twin.camera).pose * c.correction;
   EXPECT_LT((moved.translation - expected.translation).norm(), 1e-9);
   EXPECT_LT(core::AngleBetween(moved.rotation, expected.rotation), 1e-9);
+  // ... and the sensor's noise as measured, which its rendered clouds then get.
+  EXPECT_GT(c.noise.edge_dropout, 0.0);
+  EXPECT_EQ(refined.camera.noise.edge_dropout, c.noise.edge_dropout);
+  EXPECT_EQ(refined.camera.noise.sigma0, c.noise.sigma0);
   EXPECT_TRUE(std::filesystem::exists(dir / "calibrated/calibration/frame_02.png"));
   EXPECT_TRUE(std::filesystem::exists(dir / "calibrated/calibration/calibration.json"));
   std::filesystem::remove_all(dir);
@@ -85,6 +90,14 @@ TEST(CalibrateCamera, GaussNewtonFindsTheMountWithinAFewMillimetres) {
   EXPECT_LT(error.translation.norm(), 0.010);
   EXPECT_LT(core::AngleBetween(error.rotation, core::Quat::Identity()), 1.0 * M_PI / 180);
   EXPECT_LT(c.loss.back(), c.loss.front());
+  // The sensor's noise against the world's hidden one: half the returns lost at depth edges,
+  // few elsewhere (the shiny bar, dark spots), and sigma = 1 mm + 2 mm / m^2 * z^2 at the
+  // 0.8-1.1 m the scene lies at (2.3-3.4 mm), quantized to 1 mm.
+  EXPECT_GT(c.noise.edge_dropout, 0.35) << core::ToJson(c.noise).dump();
+  EXPECT_LT(c.noise.edge_dropout, 0.75) << core::ToJson(c.noise).dump();
+  EXPECT_LT(c.noise.dropout, 0.2) << core::ToJson(c.noise).dump();
+  EXPECT_GT(c.noise.sigma0, 0.0015) << core::ToJson(c.noise).dump();
+  EXPECT_LT(c.noise.sigma0, 0.005) << core::ToJson(c.noise).dump();
   std::filesystem::remove_all(dir);
 }
 
