@@ -106,7 +106,13 @@ ProxyReality::ProxyReality(const std::filesystem::path& world_dir)
   const auto& k = truth.intrinsics;
   depth_.resize(k.width * k.height);
   geom_.resize(k.width * k.height);
-  Reset({spec_.seed, 1});
+  // The scene starts at home (start_level 0) unless the world says otherwise. It is scanned
+  // where it starts, and the evaluation's levels move things around home, as a person tests a
+  // robot by moving objects around the scene they scanned. Starting every world from a level-1
+  // draw put the drawer twin's home 9 cm and 19 deg from the home the evaluation perturbs: the
+  // drawer student, 82% in its twin, scored 28% in the world's own scene and 78% with the two
+  // homes the same.
+  Reset({spec_.seed, spec_.start_level});
 }
 
 ProxyReality::~ProxyReality() = default;

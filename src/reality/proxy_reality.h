@@ -104,6 +104,9 @@ struct WorldSpec {
   std::array<double, 3> camera_offset{0, 0, 0};    // m
   std::array<double, 3> camera_rotation{0, 0, 0};  // rad, roll/pitch/yaw
   uint64_t seed = 1;                               // sensor noise stream
+  // Where the scene is when the robot is switched on, and so where it is scanned: its home
+  // (level 0), or a draw of `start_level` (seeded by `seed`). Evaluation perturbs around home.
+  int start_level = 0;
   ScanCameraSpec scan;
   OperatorStyle operator_style;  // how the world's scripted operator types
 
@@ -118,6 +121,8 @@ struct WorldSpec {
     a("camera_offset", camera_offset);
     a("camera_rotation", camera_rotation);
     a("seed", seed);
+    a("start_level", start_level);
+    a.Require(start_level >= 0 && start_level <= 3, "start_level", "a randomization level 0..3");
     a("scan", scan);
     a("operator", operator_style);
     a.Require(!name.empty(), "name", "a world name");
