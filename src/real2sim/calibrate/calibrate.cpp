@@ -106,11 +106,17 @@ torch::Tensor Draw(const torch::Tensor& mask, int count, core::Rng& rng) {
       torch::from_blob(pick.data(), {count}, torch::TensorOptions().dtype(torch::kInt64)).clone());
 }
 
-FrameFit Fit(const RealFrame& frame, const core::Pose& pose, double outlier) {
+// The twin seen from `pose` with edges a third of a pixel soft: for scores and pictures.
+SoftImage SharpImage(const RealFrame& frame, const core::Pose& pose) {
   torch::NoGradGuard no_grad;
   SoftRasterOptions sharp;
   sharp.sigma = 0.3;
-  const SoftImage image = SoftRasterize(frame.twin, frame.intrinsics, ToTensor(pose), sharp);
+  return SoftRasterize(frame.twin, frame.intrinsics, ToTensor(pose), sharp);
+}
+
+// How well `image` (the twin's, from SharpImage) matches the frame's depth.
+FrameFit Fit(const RealFrame& frame, const SoftImage& image, double outlier) {
+  torch::NoGradGuard no_grad;
   const auto seen = (frame.depth > 0) & (image.silhouette > 0.5);
   const auto error = (image.depth - frame.depth).abs().masked_select(seen);
   FrameFit fit;
@@ -121,22 +127,25 @@ FrameFit Fit(const RealFrame& frame, const core::Pose& pose, double outlier) {
   return fit;
 }
 
+FrameFit Fit(const RealFrame& frame, const core::Pose& pose, double outlier) {
+  return Fit(frame, SharpImage(frame, pose), outlier);
+}
+
 // The real sensor's noise, from the frames against the twin seen from the calibrated pose:
 // where the twin shows a surface, the share of pixels with no return at the twin's depth edges
 // and elsewhere; and the spread of the depth step between horizontal neighbours inside
 // surfaces, less the twin's own step there (what is left is the two pixels' noise, sqrt(2)
 // sigma; a robust spread, so that the scan's own errors count little).
-sim::DepthNoise EstimateNoise(const std::vector<RealFrame>& frames, const core::Pose& correction,
-                              double outlier) {
+// `images[i]` is frame i's twin from SharpImage at the calibrated pose.
+sim::DepthNoise EstimateNoise(const std::vector<RealFrame>& frames,
+                              const std::vector<SoftImage>& images, double outlier) {
   torch::NoGradGuard no_grad;
   sim::DepthNoise noise;
   int64_t edges = 0, edges_lost = 0, inside = 0, inside_lost = 0;
   std::vector<double> steps;
-  for (const RealFrame& f : frames) {
-    SoftRasterOptions sharp;
-    sharp.sigma = 0.3;
-    const SoftImage image =
-        SoftRasterize(f.twin, f.intrinsics, ToTensor(f.reported * correction), sharp);
+  for (size_t i = 0; i < frames.size(); ++i) {
+    const RealFrame& f = frames[i];
+    const SoftImage& image = images[i];
     const int w = f.intrinsics.width, h = f.intrinsics.height;
     const torch::Tensor twin_depth = image.depth.contiguous(),
                         silhouette = image.silhouette.contiguous();
@@ -455,11 +464,13 @@ CameraCalibration CalibrateCamera(const sim::TaskSpec& twin_task, const core::Sc
   } else {
     out.correction = AdamCorrection(frames, options, &out.loss, progress);
   }
+  std::vector<SoftImage> calibrated;
   for (const RealFrame& f : frames) {
-    out.after.push_back(Fit(f, f.reported * out.correction, options.outlier));
+    calibrated.push_back(SharpImage(f, f.reported * out.correction));
+    out.after.push_back(Fit(f, calibrated.back(), options.outlier));
     out.icp.push_back(Fit(f, f.reported * out.icp_correction, options.outlier));
   }
-  out.noise = EstimateNoise(frames, out.correction, options.outlier);
+  out.noise = EstimateNoise(frames, calibrated, options.outlier);
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return out;
 }
@@ -511,8 +522,6 @@ void WriteCalibratedTwin(const std::filesystem::path& twin_dir, const core::Scan
   for (size_t i = 0; i < scan.frames.size(); ++i) {
     const RealFrame f = ReadFrame(scan, i, geometry);
     torch::NoGradGuard no_grad;
-    SoftRasterOptions sharp;
-    sharp.sigma = 0.3;
     const int w = f.intrinsics.width, h = f.intrinsics.height;
     core::Image image{5 * w, h, 3, 8, std::vector<uint8_t>(5 * w * h * 3)};
     auto put = [&](int panel, const torch::Tensor& rgb) {
@@ -528,7 +537,7 @@ void WriteCalibratedTwin(const std::filesystem::path& twin_dir, const core::Scan
     int panel = 1;
     std::vector<torch::Tensor> errors;
     for (const core::Pose& pose : {f.reported, f.reported * calibration.correction}) {
-      const SoftImage s = SoftRasterize(f.twin, f.intrinsics, ToTensor(pose), sharp);
+      const SoftImage s = SharpImage(f, pose);
       put(panel++, s.rgb * s.silhouette.unsqueeze(2));
       const auto both = ((f.depth > 0) & (s.silhouette > 0.5)).to(torch::kFloat64);
       errors.push_back(((s.depth - f.depth).abs() / options.outlier).clamp(0, 1) * both);
