@@ -50,13 +50,14 @@ Segmentation SegmentScene(const Fusion& fusion, const SegmentOptions& options) {
   std::vector<std::vector<Eigen::Vector3d>> kept;
   for (auto& [label, points] : clusters) {
     if (static_cast<int>(points.size()) < options.min_points) continue;
-    // The top is the height under which 95% of the points lie: a sheet of table noise a few
-    // mm up, chained over half a metre, always has a few points higher still.
+    // Half the points must stand higher than min_top: a sheet of table noise a few mm up,
+    // chained over half a metre, always has some points higher still, but an object's sides
+    // and top put most of its points well up.
     std::vector<double> heights;
     for (const auto& p : points) heights.push_back(fusion.support.Distance(p));
-    const auto top = heights.begin() + (heights.size() * 95) / 100;
-    std::nth_element(heights.begin(), top, heights.end());
-    if (*top >= options.min_top) kept.push_back(std::move(points));
+    const auto median = heights.begin() + heights.size() / 2;
+    std::nth_element(heights.begin(), median, heights.end());
+    if (*median >= options.min_top) kept.push_back(std::move(points));
   }
   // Largest first, ties by position, so names do not depend on DBSCAN's label order.
   std::sort(kept.begin(), kept.end(), [](const auto& a, const auto& b) {

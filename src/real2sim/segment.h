@@ -15,9 +15,9 @@ struct SegmentOptions {
   double min_height = 0.008;        // m above the support plane for a point to stand on it
   double cluster_distance = 0.012;  // m: points closer than this are one cluster (DBSCAN eps)
   int min_points = 150;             // smaller clusters are noise
-  double min_top = 0.02;            // m: clusters 95% of whose points are lower are the table's own
-                          // edges (TSDF ridges where its border meets its side) or a sheet of
-                          // its depth noise, not objects
+  // m: clusters half of whose points are lower are the table's own edges (TSDF ridges where
+  // its border meets its side) or a sheet of its depth noise, not objects
+  double min_top = 0.02;
   double movable_extent = 0.2;  // m: clusters at most this wide and tall are movable objects
   int triangle_budget = 3000;   // per segment mesh
   int static_budget = 6000;     // for the static scene's mesh
