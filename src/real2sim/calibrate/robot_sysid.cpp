@@ -225,27 +225,39 @@ RobotSysidResult IdentifyRobotPhysics(const sim::TaskSpec& twin,
     r.controller_relative_error = fit.relative_error;
   }
   // The scene, from the task runs, with that controller. A value the runs do not pin down to
-  // `max_relative_error` keeps the twin's.
+  // `max_relative_error` keeps the twin's. Those error bars hold only if the model can fit the
+  // runs at all, so with two runs or more each is also fitted alone, and a value on which they
+  // disagree by more than `max_relative_error` is not identified either.
   if (!task_runs.empty() && !scene.empty()) {
     std::vector<double> lower, upper;
     for (const auto& p : scene) {
       lower.push_back(p.lower);
       upper.push_back(p.upper);
     }
-    const LeastSquaresResult fit = LeastSquaresLogSpace(
-        [&](const std::vector<double>& v) {
-          RobotPhysics p = physics;
-          p.scene = v;
-          tick("scene");
-          return replay.Residuals(p, scene, task_runs);
-        },
-        physics.scene, lower, upper, options.scene);
+    auto fit_to = [&](const std::vector<RobotTrajectory>& runs, const std::vector<double>& from) {
+      LeastSquaresResult fit = LeastSquaresLogSpace(
+          [&](const std::vector<double>& v) {
+            RobotPhysics p = physics;
+            p.scene = v;
+            tick("scene");
+            return replay.Residuals(p, scene, runs);
+          },
+          from, lower, upper, options.scene);
+      r.replays += fit.replays;
+      return fit;
+    };
+    const LeastSquaresResult fit = fit_to(task_runs, physics.scene);
     r.scene_curve = fit.error;
     r.scene_fitted = fit.values;
     r.scene_relative_error = fit.relative_error;
-    r.replays += fit.replays;
+    if (task_runs.size() >= 2)
+      for (const RobotTrajectory& run : task_runs)
+        r.scene_per_run.push_back(fit_to({run}, fit.values).values);
     for (size_t i = 0; i < scene.size(); ++i) {
-      const bool identified = fit.relative_error[i] <= options.max_relative_error;
+      bool identified = fit.relative_error[i] <= options.max_relative_error;
+      for (const auto& alone : r.scene_per_run)
+        identified = identified && std::abs(alone[i] - fit.values[i]) <=
+                                       options.max_relative_error * std::abs(fit.values[i]);
       r.scene_identified.push_back(identified);
       if (identified) physics.scene[i] = fit.values[i];
     }
@@ -276,6 +288,7 @@ core::Json ToJson(const RobotSysidResult& r) {
           {"controller_relative_error", r.controller_relative_error},
           {"scene_fitted", r.scene_fitted},
           {"scene_relative_error", r.scene_relative_error},
+          {"scene_per_run", r.scene_per_run},
           {"scene_identified", r.scene_identified},
           {"controller_curve", r.controller_curve},
           {"scene_curve", r.scene_curve},

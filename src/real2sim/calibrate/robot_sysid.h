@@ -105,6 +105,9 @@ struct RobotSysidResult {
   // identified and keeps the twin's.
   std::vector<double> controller_relative_error;  // interpolation, latency, kp, kd, friction
   std::vector<double> scene_fitted, scene_relative_error;
+  // With two task runs or more: each run's own fit (one row per run). A value the rows
+  // disagree on by more than `max_relative_error` of the joint fit is not identified.
+  std::vector<std::vector<double>> scene_per_run;
   std::vector<bool> scene_identified;
   int replays = 0;
 };

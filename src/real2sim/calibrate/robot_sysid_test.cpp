@@ -67,6 +67,44 @@ TEST(RobotSysid, RecoversAKnownControllerAndDrawer) {
   EXPECT_NEAR(id.scene[1], 5, 1e-5);
 }
 
+// The fit's error bars assume the model can fit the runs. Two runs of one drawer are fitted
+// alone and agree; two runs of drawers unlike each other (a model that cannot fit both, as the
+// twin's fixed grip cannot fit a real grip that slides along the bar) disagree, and nothing is
+// identified, however tight the joint fit's error bars.
+TEST(RobotSysid, AValueTheRunsDisagreeOnIsNotIdentified) {
+  Synthetic s;
+  s.twin.control.servo = s.truth.servo;  // the controller already known: no free moves needed
+  s.twin.control.arm_scales = s.truth.arm;
+  auto runs_of = [&](const std::vector<double>& first, const std::vector<double>& second) {
+    std::vector<RobotTrajectory> runs;
+    bool success = false;
+    s.truth.scene = first;
+    runs.push_back(s.Record("third_speed", ExpertTargets(s.twin, 3, &success)));
+    EXPECT_TRUE(success);
+    s.truth.scene = second;
+    runs.push_back(s.Record("half_speed", ExpertTargets(s.twin, 2, &success)));
+    EXPECT_TRUE(success);
+    return IdentifyRobotPhysics(s.twin, s.scene, {}, runs);
+  };
+  const RobotSysidResult same = runs_of({16, 5}, {16, 5});
+  ASSERT_EQ(same.scene_per_run.size(), 2u);
+  EXPECT_EQ(same.scene_identified, std::vector<bool>({true, true}));
+  EXPECT_NEAR(same.identified.scene[0], 16, 0.1);
+  EXPECT_NEAR(same.identified.scene[1], 5, 0.05);
+
+  const RobotSysidResult unlike = runs_of({16, 5}, {6, 2});
+  ASSERT_EQ(unlike.scene_per_run.size(), 2u);
+  std::printf("unlike: joint fit %.3f (+-%.1f%%), %.3f (+-%.1f%%)\n", unlike.scene_fitted[0],
+              100 * unlike.scene_relative_error[0], unlike.scene_fitted[1],
+              100 * unlike.scene_relative_error[1]);
+  // The joint fit's error bars alone would have taken both.
+  EXPECT_LE(unlike.scene_relative_error[0], 0.15);
+  EXPECT_LE(unlike.scene_relative_error[1], 0.15);
+  EXPECT_GT(unlike.scene_per_run[0][0], 1.5 * unlike.scene_per_run[1][0]);  // 16 against 6
+  EXPECT_EQ(unlike.scene_identified, std::vector<bool>({false, false}));
+  EXPECT_EQ(unlike.identified.scene, unlike.start.scene);
+}
+
 TEST(RobotSysid, AGripIsHeldOnlyIfTheFingersStayApart) {
   RobotTrajectory t;
   for (double finger : {0.04, 0.0, 0.0, 0.04}) {
