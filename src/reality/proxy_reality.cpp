@@ -6,6 +6,7 @@
 #include "core/config.h"
 #include "core/error.h"
 #include "core/log.h"
+#include "sim/camera.h"
 
 namespace twinforge::reality {
 
@@ -53,24 +54,16 @@ void ApplyDepthSensor(const DepthSensorSpec& sensor, const mjModel* m, int width
                       std::vector<uint16_t>& depth_mm) {
   const int n = width * height;
   depth_mm.assign(n, 0);
-  auto at = [&](int u, int v) { return depth[v * width + u]; };
+  const std::vector<uint8_t> edges = sim::DepthEdges(depth.data(), width, height, sensor.edge_jump);
   for (int v = 0; v < height; ++v)
     for (int u = 0; u < width; ++u) {
       const int i = v * width + u;
       float z = depth[i];
       if (z <= 0 || z > sensor.max_range) continue;
-      // Edges: a neighbour much nearer, much farther or missing.
-      bool edge = false;
-      for (const auto& [du, dv] : {std::pair{1, 0}, {-1, 0}, {0, 1}, {0, -1}}) {
-        const int uu = u + du, vv = v + dv;
-        if (uu < 0 || vv < 0 || uu >= width || vv >= height) continue;
-        const float zn = at(uu, vv);
-        edge = edge || zn <= 0 || std::abs(zn - z) > sensor.edge_jump;
-      }
       // The rng is drawn the same number of times whatever the outcome, so a change in one
       // pixel does not reshuffle the noise of all the others.
       const double edge_draw = rng.Uniform(), surface_draw = rng.Uniform(), noise = rng.Normal();
-      if (edge && edge_draw < sensor.edge_dropout) continue;
+      if (edges[i] && edge_draw < sensor.edge_dropout) continue;
       if (geom && geom[i] >= 0) {
         const int g = geom[i], mat = m->geom_matid[g];
         const bool dark = Luminance(sim::GeomRgba(m, g)) < sensor.dark_luminance;

@@ -152,23 +152,27 @@ void RayCaster::Render(const mjModel* m, const mjData* d, const core::Pose& base
   }
 }
 
+std::vector<uint8_t> DepthEdges(const float* depth, int width, int height, double jump) {
+  std::vector<uint8_t> edge(static_cast<size_t>(width) * height, 0);
+  auto differs = [&](int i, int j) {
+    return depth[j] <= 0 || std::abs(depth[j] - depth[i]) > jump;
+  };
+  for (int v = 0; v < height; ++v)
+    for (int u = 0; u < width; ++u) {
+      const int i = v * width + u;
+      if (depth[i] <= 0) continue;
+      edge[i] = (u > 0 && differs(i, i - 1)) || (u + 1 < width && differs(i, i + 1)) ||
+                (v > 0 && differs(i, i - width)) || (v + 1 < height && differs(i, i + width));
+    }
+  return edge;
+}
+
 void AddDepthNoise(float* depth, int width, int height, const DepthNoise& noise, core::Rng& rng) {
   if (noise.off()) return;
   const int count = width * height;
-  std::vector<uint8_t> edge(count, 0);
-  if (noise.edge_dropout > 0) {
-    const float jump = static_cast<float>(noise.edge_jump);
-    auto differs = [&](int i, int j) {
-      return depth[j] <= 0 || std::abs(depth[j] - depth[i]) > jump;
-    };
-    for (int v = 0; v < height; ++v)
-      for (int u = 0; u < width; ++u) {
-        const int i = v * width + u;
-        if (depth[i] <= 0) continue;
-        edge[i] = (u > 0 && differs(i, i - 1)) || (u + 1 < width && differs(i, i + 1)) ||
-                  (v > 0 && differs(i, i - width)) || (v + 1 < height && differs(i, i + width));
-      }
-  }
+  const std::vector<uint8_t> edge = noise.edge_dropout > 0
+                                        ? DepthEdges(depth, width, height, noise.edge_jump)
+                                        : std::vector<uint8_t>(count, 0);
   for (int i = 0; i < count; ++i) {
     if (depth[i] <= 0) continue;
     const double lose = edge[i] ? noise.edge_dropout : noise.dropout;

@@ -72,6 +72,12 @@ class RayCaster {
   std::vector<double> z_scale_;     // optical-axis component of each ray
 };
 
+// The edges of a width x height depth image (0 = no return): pixels with a return that have a
+// 4-neighbour with none, or one nearer or farther by more than `jump` m. Every depth sensor here
+// (the twin's noise model, its estimate from real frames, the proxy's hidden sensor) loses
+// returns at these pixels.
+std::vector<uint8_t> DepthEdges(const float* depth, int width, int height, double jump);
+
 // Applies a sensor's noise (DepthNoise, in sim/task.h) to a width x height depth image in place:
 // edge pixels (found on the image as given) and others lose their return with their
 // probabilities, then the returns get Gaussian noise and are quantized. Pixels with no return

@@ -117,6 +117,27 @@ TEST(Camera, DepthNoiseDropsEdgesAndQuantizes) {
   EXPECT_NEAR(double(kept) / others, 2.0 / 3, 0.06);
 }
 
+TEST(Camera, DepthEdgesAreStepsAndHolesNotSlopes) {
+  // 5 x 3: a slope of 1 cm per pixel on the left, an 18 cm step between u = 2 and 3, a hole at
+  // (4, 1).
+  const int w = 5, h = 3;
+  std::vector<float> depth(w * h);
+  for (int v = 0; v < h; ++v)
+    for (int u = 0; u < w; ++u) depth[v * w + u] = u < 3 ? 1.0f + 0.01f * u : 1.2f;
+  depth[1 * w + 4] = 0;
+  const std::vector<uint8_t> edge = DepthEdges(depth.data(), w, h, 0.05);
+  const std::vector<uint8_t> want = {0, 0, 1, 1, 1,  //
+                                     0, 0, 1, 1, 0,  // the hole itself is no edge
+                                     0, 0, 1, 1, 1};
+  EXPECT_EQ(edge, want);
+  // With a threshold above the 18 cm step, only the hole's neighbours are edges.
+  const std::vector<uint8_t> loose = DepthEdges(depth.data(), w, h, 0.5);
+  const std::vector<uint8_t> want_loose = {0, 0, 0, 0, 1,  //
+                                           0, 0, 0, 1, 0,  //
+                                           0, 0, 0, 0, 1};
+  EXPECT_EQ(loose, want_loose);
+}
+
 TEST(Camera, DepthNoiseGrowsWithDistance) {
   std::vector<float> near(20000, 0.5f), far(20000, 1.5f);
   core::Rng rng(3);

@@ -153,15 +153,13 @@ sim::DepthNoise EstimateNoise(const std::vector<RealFrame>& frames,
     const auto shown = silhouette.accessor<double, 2>();
     const auto real = f.depth.accessor<double, 2>();
     auto surface = [&](int r, int c) { return shown[r][c] > 0.5 && twin[r][c] > 0; };
-    auto edge = [&](int r, int c) {
-      const int dr[] = {-1, 1, 0, 0}, dc[] = {0, 0, -1, 1};
-      for (int k = 0; k < 4; ++k) {
-        const int rr = r + dr[k], cc = c + dc[k];
-        if (rr < 0 || rr >= h || cc < 0 || cc >= w) continue;
-        if (!surface(rr, cc) || std::abs(twin[rr][cc] - twin[r][c]) > noise.edge_jump) return true;
-      }
-      return false;
-    };
+    // The twin's depth, with no return off its silhouette.
+    std::vector<float> seen(static_cast<size_t>(w) * h, 0.0f);
+    for (int r = 0; r < h; ++r)
+      for (int c = 0; c < w; ++c)
+        if (surface(r, c)) seen[r * w + c] = static_cast<float>(twin[r][c]);
+    const std::vector<uint8_t> is_edge = sim::DepthEdges(seen.data(), w, h, noise.edge_jump);
+    auto edge = [&](int r, int c) { return is_edge[r * w + c] != 0; };
     for (int r = 0; r < h; ++r)
       for (int c = 0; c < w; ++c) {
         if (!surface(r, c)) continue;
