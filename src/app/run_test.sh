@@ -29,20 +29,27 @@ fi
 grep -q '"bc"' "$d/run/manifest.json"
 if grep -q '"rl"' "$d/run/manifest.json"; then echo "rl recorded before it finished" >&2; exit 1; fi
 "$tf" run --config "$src/assets/runs/smoke.json" --out "$d/run" > "$d/out.json" 2> "$d/second.log"
-for stage in scan twin calibrate demos bc inverse_distill; do
-  grep -q "stage [0-9]*/11 $stage: up to date" "$d/second.log" ||
+for stage in scan twin calibrate sysid demos bc inverse_distill; do
+  grep -q "stage [0-9]*/12 $stage: up to date" "$d/second.log" ||
     { echo "stage $stage ran again" >&2; cat "$d/second.log" >&2; exit 1; }
 done
 grep -q "resum" "$d/second.log" || { echo "rl did not resume its checkpoint" >&2; exit 1; }
 for f in eval/report.html eval/student.json eval/bc_real.json eval/student.jsonl \
-  policies/student.pt policies/teacher.pt eval/twin_view.png calibrated/calibration/frame_00.png; do
+  policies/student.pt policies/teacher.pt eval/twin_view.png calibrated/calibration/frame_00.png \
+  identified/sysid/sysid.json; do
   [ -s "$d/run/$f" ] || { echo "missing $f" >&2; exit 1; }
 done
 grep -q "Success on reality" "$d/run/eval/report.html"
+grep -q "Physics identified on the robot" "$d/run/eval/report.html"
+# sysid measured the proxy arm's lagging servo: the identified twin's has a latency.
+if grep -q "latency: 0$" "$d/run/identified/task.yaml"; then
+  echo "the identified twin's servo has no latency" >&2
+  exit 1
+fi
 [ "$(wc -l < "$d/run/eval/student.jsonl")" -eq 5 ]  # header + 2 levels x 2 trials
 # A third run has nothing left to do but the report.
 "$tf" run --config "$src/assets/runs/smoke.json" --out "$d/run" > /dev/null 2> "$d/third.log"
-[ "$(grep -c 'up to date' "$d/third.log")" -eq 10 ]
+[ "$(grep -c 'up to date' "$d/third.log")" -eq 11 ]
 # New sim demos (from the twin's scripted operator instead of inverse distillation): the teacher
 # starts over rather than resuming a checkpoint made from the old ones.
 "$tf" run --config "$src/assets/runs/smoke.json" --out "$d/run" --sim-demos expert > /dev/null \

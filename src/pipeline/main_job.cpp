@@ -15,6 +15,7 @@
 #include "learn/ppo.h"
 #include "pipeline/reality_eval.h"
 #include "pipeline/run_directory.h"
+#include "pipeline/twin_sysid.h"
 #include "real2sim/build.h"
 #include "reality/connect.h"
 #include "reality/demos.h"
@@ -98,7 +99,7 @@ class Job {
                       real2sim::BuildTwin(run_ / "scan", run_ / "twin", b));
           });
     // Where the fixed camera really is: the twin rendered against its frames.
-    const std::filesystem::path twin = o_.camera_frames > 0 ? run_ / "calibrated" : run_ / "twin";
+    std::filesystem::path twin = o_.camera_frames > 0 ? run_ / "calibrated" : run_ / "twin";
     if (o_.camera_frames > 0) {
       Stage("calibrate",
             Fingerprint()
@@ -120,6 +121,25 @@ class Job {
             });
       // Real frames become clouds with the calibrated camera, in the demos and the evaluations.
       task_.camera = sim::LoadTaskSpec((twin / "task.yaml").string()).camera;
+    }
+    // How the real arm and the moving parts respond: the twin's servo is ideal and its scene
+    // values are the recipe's guesses until sysid measures them.
+    if (o_.sysid) {
+      const std::filesystem::path identified = run_ / "identified";
+      Stage("sysid",
+            Fingerprint()
+                .Add(reality)
+                .AddFile(twin / "task.yaml")
+                .AddFile(twin / "scene.xml")
+                .Add(core::ToJson(o_.sysid_options).dump())
+                .Hex(),
+            {"identified/task.yaml", "identified/sysid/sysid.json"}, [&] {
+              std::filesystem::remove_all(identified);
+              core::Progress progress("sysid", 0, "replays");
+              IdentifyTwin(Robot(), twin, identified, o_.sysid_options, &progress);
+              progress.Finish();
+            });
+      twin = identified;
     }
     const std::string camera = core::ToJson(task_.camera).dump();
     Stage("demos", Fingerprint().Add(reality).Add(camera).Add(std::to_string(o_.demos)).Hex(),
@@ -353,7 +373,7 @@ class Job {
   }
 
   MainJobOptions o_;
-  int stages_ = o_.camera_frames > 0 ? 11 : 10;
+  int stages_ = 10 + (o_.camera_frames > 0) + o_.sysid;
   RunDirectory run_;
   sim::TaskSpec task_;
   std::unique_ptr<reality::RealityConnection> connection_;

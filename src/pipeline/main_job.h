@@ -3,8 +3,10 @@
 //   runs/NAME/scan/, scan_open/     RGB-D scans (the second after the operator moved the part)
 //   runs/NAME/camera/               frames of the fixed camera, taken with the scene as scanned
 //   runs/NAME/twin/                 the articulated twin and its task.yaml
-//   runs/NAME/calibrated/           the twin with the camera where calibration found it (every
-//                                   later stage uses this twin and this camera)
+//   runs/NAME/calibrated/           the twin with the camera where calibration found it
+//   runs/NAME/identified/           ... and the arm's controller and the moving parts' physics
+//                                   sysid measured on the robot (every later stage uses the
+//                                   last of these twins, and the calibrated camera)
 //   runs/NAME/demos/real.hdf5       teleoperated demos on reality
 //   runs/NAME/policies/bc_real.pt   BC on them
 //   runs/NAME/demos/sim.hdf5        inverse distillation's successes in the twin
@@ -24,6 +26,7 @@
 
 #include "learn/distill.h"
 #include "real2sim/calibrate/calibrate.h"
+#include "real2sim/calibrate/robot_sysid.h"
 #include "reality/scan.h"
 #include "sim/task.h"
 
@@ -33,6 +36,17 @@ inline real2sim::CalibrateOptions AdamCalibration() {
   real2sim::CalibrateOptions c;
   c.solver = "adam";
   return c;
+}
+
+inline sim::PhysicsRandomization SceneUncertainty() {
+  sim::PhysicsRandomization p;
+  p.from_level = 0;
+  p.damping = {0.5, 2};
+  p.frictionloss = {0.5, 2};
+  p.mass = {0.5, 2};
+  p.friction = {0.7, 1.3};
+  p.grip_force = {0.5, 1.2};
+  return p;
 }
 
 struct MainJobOptions {
@@ -50,6 +64,12 @@ struct MainJobOptions {
   double camera_frames_height = 0.15;  // m above the camera's look-at point
   double camera_frames_spread = 0.12;  // m
   real2sim::CalibrateOptions calibrate = AdamCalibration();
+  // Identify the twin's physics on the robot (free-arm moves and two task runs, about 2 min):
+  // the servo's latency and interpolation, the arm's gains and the moving parts' damping, dry
+  // friction and mass, each where the runs pin it down. Measured at stop 27 on the proxy drawer:
+  // the ideal servo alone cost the stop-26 student 20 / 10 / 13 points in its own twin.
+  bool sysid = true;
+  real2sim::RobotSysidOptions sysid_options;
   int demos = 15;
   int bc_epochs = 300;     // at most (early stopping)
   int inverse_demos = 12;  // sim demos to keep
@@ -67,9 +87,12 @@ struct MainJobOptions {
   int rl_bc_pretrain_steps = 0;  // BC alone on the sim demos before PPO (learn::PpoOptions)
   int rl_critic_warmup = 0;
   // Scene physics drawn per episode in the twin while the teacher trains and is distilled
-  // (sim::PhysicsRandomization; off unless `from_level` <= 3): the recipe's masses, frictions
-  // and damping are guesses, and the real gripper's force may not be the model's.
-  sim::PhysicsRandomization physics;
+  // (sim::PhysicsRandomization; `from_level` 4 turns it off): what sysid leaves unidentified
+  // keeps the recipe's guess, and what it identifies from two task runs may still be biased
+  // (docs/calibrate.md), so the moving parts' damping, dry friction and mass are drawn from half
+  // to twice the twin's. A gripper holds with less than its rated force as its pads wear: the
+  // fingers' force is drawn from half to 1.2 times the model's.
+  sim::PhysicsRandomization physics = SceneUncertainty();
   learn::DistillOptions distill;
   std::vector<int> levels = {1, 2, 3};
   int trials = 50;  // per level, for the student and the BC baseline
@@ -84,6 +107,8 @@ struct MainJobOptions {
     a("camera_frames_height", camera_frames_height);
     a("camera_frames_spread", camera_frames_spread);
     a("calibrate", calibrate);
+    a("sysid", sysid);
+    a("sysid_options", sysid_options);
     a("demos", demos);
     a("bc_epochs", bc_epochs);
     a("inverse_demos", inverse_demos);

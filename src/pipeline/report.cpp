@@ -143,6 +143,36 @@ std::filesystem::path WriteReport(const std::filesystem::path& root) {
            "error before | after (black: agree, white: 8 cm or more).</p>\n";
   }
 
+  const nlohmann::json sysid = ReadJson(root / "identified/sysid/sysid.json");
+  if (sysid.is_object()) {
+    const auto& start = sysid["start"];
+    const auto& found = sysid["identified"];
+    char line[512];
+    std::snprintf(line, sizeof(line),
+                  "<h2>Physics identified on the robot</h2>\n<p>The arm's joints in the twin "
+                  "against the robot's, same targets (RMS): free moves %.3f deg before, %.3f "
+                  "deg after; task runs %.3f deg before, %.3f deg after.</p>\n",
+                  sysid["free_moves_rms_deg"]["before"].get<double>(),
+                  sysid["free_moves_rms_deg"]["after"].get<double>(),
+                  sysid["task_runs_rms_deg"]["before"].get<double>(),
+                  sysid["task_runs_rms_deg"]["after"].get<double>());
+    h << line << "<table><tr><th>value</th><th>twin before</th><th>identified</th></tr>\n";
+    auto row = [&](const std::string& name, double before, double after) {
+      std::snprintf(line, sizeof(line), "<tr><td>%s</td><td>%.4g</td><td>%.4g</td></tr>\n",
+                    core::EscapeXml(name).c_str(), before, after);
+      h << line;
+    };
+    for (const char* key : {"latency", "interpolation"})
+      row(std::string("servo ") + key, start["servo"][key].get<double>(),
+          found["servo"][key].get<double>());
+    for (const char* key : {"kp", "kd", "frictionloss"})
+      row(std::string("arm ") + key + " scale", start["arm_scales"][key].get<double>(),
+          found["arm_scales"][key].get<double>());
+    for (const auto& [name, value] : start["scene"].items())
+      row(name, value.get<double>(), found["scene"][name].get<double>());
+    h << "</table><p>A scene value the task runs do not pin down keeps the twin's.</p>\n";
+  }
+
   h << "<h2>Learning</h2>\n";
   const auto bc = ReadCsv(root / "policies/bc_real.curve.csv");
   if (bc.size() > 1) {

@@ -1,0 +1,27 @@
+// System identification of a twin on its robot, as one step: the experiments planned in the twin
+// (free-arm moves, the scripted task at full and half speed), run on the robot, the fit
+// (real2sim::IdentifyRobotPhysics), and the refined twin written. `twinforge sysid` and the main
+// job's sysid stage both call it.
+#pragma once
+
+#include <filesystem>
+
+#include "core/config.h"
+#include "core/progress.h"
+#include "real2sim/calibrate/robot_sysid.h"
+#include "reality/robot.h"
+
+namespace twinforge::pipeline {
+
+// Identifies the physics of the twin in `twin` (task.yaml; twin.yaml, when present, names the
+// moving parts whose damping, dry friction and mass are fitted) on `robot` and writes the refined
+// twin to `out`: a copy of `twin` with the identified controller in task.yaml, and the identified
+// scene values in twin.yaml and scene.xml. Values the runs do not pin down keep the twin's.
+// Writes out/sysid/sysid.json (the fit) and out/sysid/trajectories.json (what was recorded) and
+// returns the former. `out` must lie outside `twin`.
+core::Json IdentifyTwin(reality::Robot& robot, const std::filesystem::path& twin,
+                        const std::filesystem::path& out,
+                        const real2sim::RobotSysidOptions& options = {},
+                        core::Progress* progress = nullptr);
+
+}  // namespace twinforge::pipeline
