@@ -167,7 +167,8 @@ std::vector<uint8_t> DepthEdges(const float* depth, int width, int height, doubl
   return edge;
 }
 
-void AddDepthNoise(float* depth, int width, int height, const DepthNoise& noise, core::Rng& rng) {
+void AddDepthNoise(float* depth, int width, int height, const DepthNoise& noise, core::Rng& rng,
+                   const int* geom, const std::vector<double>& surface_dropout) {
   if (noise.off()) return;
   const int count = width * height;
   const std::vector<uint8_t> edge = noise.edge_dropout > 0
@@ -180,11 +181,33 @@ void AddDepthNoise(float* depth, int width, int height, const DepthNoise& noise,
       depth[i] = 0;
       continue;
     }
+    const double surface =
+        geom && geom[i] >= 0 && geom[i] < static_cast<int>(surface_dropout.size())
+            ? surface_dropout[geom[i]]
+            : 0.0;
+    if (surface > 0 && rng.Uniform() < surface) {
+      depth[i] = 0;
+      continue;
+    }
     double z = depth[i];
     z += rng.Normal() * (noise.sigma0 + noise.sigma_z2 * z * z);
     if (noise.quantization > 0) z = noise.quantization * std::round(z / noise.quantization);
     depth[i] = static_cast<float>(std::max(0.0, z));
   }
+}
+
+std::vector<double> SurfaceDropoutByGeom(const mjModel* m, const DepthNoise& noise) {
+  if (noise.surfaces.empty()) return {};
+  std::vector<double> out(m->ngeom, 0.0);
+  for (size_t i = 0; i < noise.surfaces.size(); ++i) {
+    const SurfaceDropout& s = noise.surfaces[i];
+    const int g = mj_name2id(m, mjOBJ_GEOM, s.geom.c_str());
+    if (g < 0)
+      throw core::ConfigError("camera.noise.surfaces[" + std::to_string(i) + "]", "geom",
+                              "a geom of the scene ('" + s.geom + "' is not one)");
+    out[g] = s.dropout;
+  }
+  return out;
 }
 
 int DepthToPoints(const Camera& camera, const float* depth, const Workspace& workspace,
@@ -323,9 +346,12 @@ CloudMaker::CloudMaker(const Task& task, const mjModel* m, const Options& option
       scene_sampler_(m, ~(1u << kRobotGeomGroup)),
       arm_sampler_(m, 1u << kRobotGeomGroup),
       robot_(task.index().robot),
-      mask_(options.rendered ? std::make_unique<RobotMask>(task.robot()) : nullptr) {
+      mask_(options.rendered ? std::make_unique<RobotMask>(task.robot()) : nullptr),
+      surface_dropout_(options.rendered ? SurfaceDropoutByGeom(m, options.noise)
+                                        : std::vector<double>{}) {
   const auto& k = caster_.camera().intrinsics;
   depth_.resize(k.width * k.height);
+  if (!surface_dropout_.empty()) geom_.resize(k.width * k.height);
   scratch_.resize(
       3 * std::max({k.width * k.height, scene_sampler_.capacity(), arm_sampler_.capacity()}));
 }
@@ -336,9 +362,10 @@ void CloudMaker::Make(const mjModel* m, const mjData* d, const core::Pose& base,
                       float* scene, float* arm) {
   int n = 0;
   if (options_.rendered) {
-    caster_.Render(m, d, base, depth_.data(), nullptr);
+    int* geom = geom_.empty() ? nullptr : geom_.data();
+    caster_.Render(m, d, base, depth_.data(), nullptr, false, geom);
     const auto& k = caster_.camera().intrinsics;
-    AddDepthNoise(depth_.data(), k.width, k.height, options_.noise, rng);
+    AddDepthNoise(depth_.data(), k.width, k.height, options_.noise, rng, geom, surface_dropout_);
     ArmVector q;
     for (int j = 0; j < kArmDof; ++j) q[j] = d->qpos[robot_.arm_qpos[j]];
     mask_->Pose(q, d->qpos[robot_.finger_qpos[0]] + d->qpos[robot_.finger_qpos[1]]);

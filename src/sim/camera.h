@@ -80,9 +80,16 @@ std::vector<uint8_t> DepthEdges(const float* depth, int width, int height, doubl
 
 // Applies a sensor's noise (DepthNoise, in sim/task.h) to a width x height depth image in place:
 // edge pixels (found on the image as given) and others lose their return with their
-// probabilities, then the returns get Gaussian noise and are quantized. Pixels with no return
-// stay 0. Draws nothing from `rng` when the noise is off.
-void AddDepthNoise(float* depth, int width, int height, const DepthNoise& noise, core::Rng& rng);
+// probabilities; with `geom` (the geom each pixel sees, -1 for none), a return that survived is
+// then lost with its geom's `surface_dropout` (indexed by geom id; SurfaceDropoutByGeom). The
+// returns left get Gaussian noise and are quantized. Pixels with no return stay 0. Draws
+// nothing from `rng` when the noise is off.
+void AddDepthNoise(float* depth, int width, int height, const DepthNoise& noise, core::Rng& rng,
+                   const int* geom = nullptr, const std::vector<double>& surface_dropout = {});
+
+// The noise's surface dropouts indexed by `m`'s geom ids (0 for the other geoms); empty when it
+// has none. Throws ConfigError naming a surface geom `m` does not have.
+std::vector<double> SurfaceDropoutByGeom(const mjModel* m, const DepthNoise& noise);
 
 // Back-projects a depth image into base-frame points inside `workspace`; writes up to
 // width*height points to xyz and returns how many.
@@ -154,9 +161,11 @@ class CloudMaker {
   Workspace workspace_;
   RayCaster caster_;
   SurfaceSampler scene_sampler_, arm_sampler_;
-  RobotIndex robot_;                 // in the env's model
-  std::unique_ptr<RobotMask> mask_;  // the robot alone, to cut out of rendered depth
+  RobotIndex robot_;                     // in the env's model
+  std::unique_ptr<RobotMask> mask_;      // the robot alone, to cut out of rendered depth
+  std::vector<double> surface_dropout_;  // by geom id (empty: no surface loses more)
   std::vector<float> depth_, scratch_;
+  std::vector<int> geom_;  // the geom each pixel sees, when surfaces have their own dropout
 };
 
 }  // namespace twinforge::sim

@@ -8,6 +8,7 @@
 #include <set>
 #include <vector>
 
+#include "core/error.h"
 #include "core/fs.h"
 #include "core/test_support.h"
 #include "sim/env.h"
@@ -136,6 +137,38 @@ TEST(Camera, DepthEdgesAreStepsAndHolesNotSlopes) {
                                            0, 0, 0, 1, 0,  //
                                            0, 0, 0, 0, 1};
   EXPECT_EQ(loose, want_loose);
+}
+
+TEST(Camera, AShinySurfaceLosesItsOwnShareOfReturns) {
+  // A flat 100 x 100 image: the left half sees geom 0, the right half geom 1, which the sensor
+  // loses 60% of; 10% of every surface's returns are lost anyway.
+  const int w = 100, h = 100;
+  std::vector<float> depth(w * h, 1.0f);
+  std::vector<int> geom(w * h);
+  for (int i = 0; i < w * h; ++i) geom[i] = i % w < w / 2 ? 0 : 1;
+  DepthNoise noise;
+  noise.dropout = 0.1;
+  core::Rng rng(5);
+  AddDepthNoise(depth.data(), w, h, noise, rng, geom.data(), {0.0, 0.6});
+  int kept[2] = {0, 0};
+  for (int i = 0; i < w * h; ++i) kept[geom[i]] += depth[i] > 0;
+  EXPECT_NEAR(kept[0] / (0.5 * w * h), 0.9, 0.02);
+  EXPECT_NEAR(kept[1] / (0.5 * w * h), 0.9 * 0.4, 0.03);
+
+  // By name, in a scene's geom ids; a name the scene lacks is named.
+  const auto task = BoxTask();
+  Env env(task);
+  noise.surfaces = {{"block", 0.6}};
+  const std::vector<double> by_geom = SurfaceDropoutByGeom(env.model(), noise);
+  ASSERT_EQ(static_cast<int>(by_geom.size()), env.model()->ngeom);
+  EXPECT_EQ(by_geom[mj_name2id(env.model(), mjOBJ_GEOM, "block")], 0.6);
+  noise.surfaces = {{"blok", 0.6}};
+  try {
+    SurfaceDropoutByGeom(env.model(), noise);
+    FAIL() << "an unknown geom was taken";
+  } catch (const core::ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("'blok'"), std::string::npos) << e.what();
+  }
 }
 
 TEST(Camera, DepthNoiseGrowsWithDistance) {

@@ -244,6 +244,20 @@ struct ExpertSpec {
 // depth edges (a 4-neighbour `edge_jump` nearer or farther, or with no return) with probability
 // `edge_dropout` and elsewhere with `dropout`, and depth reported in steps of `quantization`.
 // `twinforge calibrate` measures it on the real camera's frames against the twin.
+// A surface the depth sensor loses more returns on than the rest of the scene (shiny metal,
+// dark plastic): a return there that survived the other dropouts is lost with this probability.
+struct SurfaceDropout {
+  std::string geom;  // the geom's name in the scene
+  double dropout = 0.0;
+  template <class A>
+  void Serialize(A& a) {
+    a("geom", geom);
+    a("dropout", dropout);
+    a.Require(!geom.empty(), "geom", "a geom name");
+    a.Require(dropout >= 0 && dropout <= 1, "dropout", "a probability in [0, 1]");
+  }
+};
+
 struct DepthNoise {
   double sigma0 = 0.0;
   double sigma_z2 = 0.0;
@@ -251,8 +265,10 @@ struct DepthNoise {
   double edge_dropout = 0.0;
   double dropout = 0.0;
   double quantization = 0.0;
+  std::vector<SurfaceDropout> surfaces;
   bool off() const {
-    return sigma0 <= 0 && sigma_z2 <= 0 && edge_dropout <= 0 && dropout <= 0 && quantization <= 0;
+    return sigma0 <= 0 && sigma_z2 <= 0 && edge_dropout <= 0 && dropout <= 0 && quantization <= 0 &&
+           surfaces.empty();
   }
   template <class A>
   void Serialize(A& a) {
@@ -262,6 +278,7 @@ struct DepthNoise {
     a("edge_dropout", edge_dropout);
     a("dropout", dropout);
     a("quantization", quantization);
+    a("surfaces", surfaces);
     a.Require(sigma0 >= 0 && sigma_z2 >= 0 && quantization >= 0, "sigma0",
               "non-negative noise and quantization (m)");
     a.Require(edge_dropout >= 0 && edge_dropout <= 1 && dropout >= 0 && dropout <= 1, "dropout",

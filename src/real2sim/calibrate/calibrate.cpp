@@ -191,6 +191,53 @@ sim::DepthNoise EstimateNoise(const std::vector<RealFrame>& frames,
   return noise;
 }
 
+// Surfaces the real sensor loses more returns on than the rest (shiny metal, dark plastic). For
+// each scene geom the twin (ray-cast from the calibrated pose, `depth[i]` and `geom[i]` for frame
+// i) shows on enough pixels: the returns the frames kept there, against what `noise`'s edge and
+// surface dropouts alone would keep. A geom is listed when it kept at most 90% of that, and the
+// shortfall is over 3 standard deviations of those dropouts' own spread.
+std::vector<sim::SurfaceDropout> EstimateSurfaceDropout(
+    const std::vector<RealFrame>& frames, const std::vector<std::vector<float>>& depth,
+    const std::vector<std::vector<int>>& geom, const sim::DepthNoise& noise, const mjModel* m) {
+  torch::NoGradGuard no_grad;
+  const int mount = mj_name2id(m, mjOBJ_BODY, "robot_mount");
+  struct Count {
+    int pixels = 0;
+    double kept = 0, expected = 0, variance = 0;
+  };
+  std::vector<Count> counts(m->ngeom);
+  for (size_t i = 0; i < frames.size(); ++i) {
+    const int w = frames[i].intrinsics.width, h = frames[i].intrinsics.height;
+    const auto real = frames[i].depth.contiguous();
+    const double* r = real.data_ptr<double>();
+    const std::vector<uint8_t> edges = sim::DepthEdges(depth[i].data(), w, h, noise.edge_jump);
+    for (int p = 0; p < w * h; ++p) {
+      const int g = geom[i][p];
+      if (g < 0 || (mount >= 0 && sim::InSubtree(m, m->geom_bodyid[g], mount))) continue;
+      const double lose = edges[p] ? noise.edge_dropout : noise.dropout;
+      Count& c = counts[g];
+      ++c.pixels;
+      c.kept += r[p] > 0;
+      c.expected += 1 - lose;
+      c.variance += lose * (1 - lose);
+    }
+  }
+  std::vector<sim::SurfaceDropout> out;
+  for (int g = 0; g < m->ngeom; ++g) {
+    const Count& c = counts[g];
+    const char* name = mj_id2name(m, mjOBJ_GEOM, g);
+    if (!name || c.pixels < 20) continue;
+    const double dropout = 1 - c.kept / c.expected;
+    spdlog::debug("calibrate: '{}': {} pixels, {:.0f} returns kept, {:.1f} expected", name,
+                  c.pixels, c.kept, c.expected);
+    if (dropout < 0.1 || c.expected - c.kept < 3 * std::sqrt(c.variance + 1)) continue;
+    out.push_back({name, std::min(dropout, 0.95)});
+    spdlog::info("calibrate: the sensor loses {:.0f}% of the returns on '{}' ({} pixels)",
+                 100 * dropout, name, c.pixels);
+  }
+  return out;
+}
+
 // Open3D point-to-plane ICP of the real clouds (from the reported pose) onto the twin's surface:
 // the correction it implies for the camera (fixed mount: one for all frames).
 core::Pose IcpCorrection(const std::vector<RealFrame>& frames, double outlier) {
@@ -469,6 +516,14 @@ CameraCalibration CalibrateCamera(const sim::TaskSpec& twin_task, const core::Sc
     out.icp.push_back(Fit(f, f.reported * out.icp_correction, options.outlier));
   }
   out.noise = EstimateNoise(frames, calibrated, options.outlier);
+  std::vector<std::vector<float>> cast_depth(frames.size());
+  std::vector<std::vector<int>> cast_geom(frames.size());
+  for (size_t i = 0; i < frames.size(); ++i)
+    geometry.RayCast(scan.frames[i].joint_positions, scan.frames[i].gripper_width,
+                     {frames[i].intrinsics, frames[i].reported * out.correction}, &cast_depth[i],
+                     &cast_geom[i]);
+  out.noise.surfaces =
+      EstimateSurfaceDropout(frames, cast_depth, cast_geom, out.noise, geometry.model());
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return out;
 }

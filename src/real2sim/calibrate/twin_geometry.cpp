@@ -42,14 +42,30 @@ TwinGeometry::TwinGeometry(const sim::TaskSpec& spec, int mesh_triangles)
     throw core::ConfigError(spec.file.string(), "scene", "a twin scene with visible geoms");
 }
 
-RasterMesh TwinGeometry::Posed(const std::array<double, 7>& q, double gripper_width,
-                               const GeomColor& color) {
-  const mjModel* m = env_.model();
+void TwinGeometry::PoseArm(const std::array<double, 7>& q, double gripper_width) {
   mjData* d = env_.mutable_data();
   const auto& robot = task_->index().robot;
   for (int i = 0; i < sim::kArmDof; ++i) d->qpos[robot.arm_qpos[i]] = q[i];
   for (int i = 0; i < 2; ++i) d->qpos[robot.finger_qpos[i]] = 0.5 * gripper_width;
-  mj_kinematics(m, d);
+  mj_kinematics(env_.model(), d);
+}
+
+void TwinGeometry::RayCast(const std::array<double, 7>& q, double gripper_width,
+                           const sim::Camera& camera, std::vector<float>* depth,
+                           std::vector<int>* geom) {
+  PoseArm(q, gripper_width);
+  const int n = camera.intrinsics.width * camera.intrinsics.height;
+  depth->resize(n);
+  geom->resize(n);
+  sim::RayCaster caster(camera, env_.model());
+  caster.Render(env_.model(), env_.data(), env_.base(), depth->data(), nullptr, true, geom->data());
+}
+
+RasterMesh TwinGeometry::Posed(const std::array<double, 7>& q, double gripper_width,
+                               const GeomColor& color) {
+  const mjModel* m = env_.model();
+  const mjData* d = env_.data();
+  PoseArm(q, gripper_width);
   const core::Pose to_base = env_.base().Inverse();
   std::vector<double> v, c;
   std::vector<int64_t> f;

@@ -14,6 +14,7 @@
 
 #include "real2sim/calibrate/soft_render.h"
 #include "real2sim/mesh.h"
+#include "sim/camera.h"
 #include "sim/env.h"
 #include "sim/task.h"
 
@@ -32,9 +33,17 @@ class TwinGeometry {
   RasterMesh Posed(const std::array<double, 7>& q, double gripper_width,
                    const GeomColor& color = nullptr);
 
+  // The twin ray-cast from `camera` (robot included, arm at `q`): depth (m along the optical
+  // axis, 0 = no return) and the geom each pixel sees (-1 = none), width x height of its
+  // intrinsics.
+  void RayCast(const std::array<double, 7>& q, double gripper_width, const sim::Camera& camera,
+               std::vector<float>* depth, std::vector<int>* geom);
+
   const mjModel* model() const { return env_.model(); }
 
  private:
+  void PoseArm(const std::array<double, 7>& q, double gripper_width);
+
   struct Piece {
     int geom = -1;
     Mesh mesh;  // geom frame, scaled
