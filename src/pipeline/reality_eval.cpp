@@ -89,19 +89,31 @@ RealityEvalReport EvaluateOnReality(reality::Robot& robot, const std::filesystem
     header["residual_hash"] = Fingerprint().AddFile(options.residual).Hex();
   }
   std::map<std::pair<int, int>, TrialRecord> done;
-  if (std::filesystem::exists(log) && std::filesystem::file_size(log) > 0) {
+  auto same_trials = [&] {
     std::ifstream in(log);
     std::string line;
     std::getline(in, line);
-    nlohmann::json old = nlohmann::json::parse(line, nullptr, false);
-    if (old.is_discarded() || old.value("policy_hash", "") != header["policy_hash"] ||
-        old.value("task", "") != task.name || old.value("seed", uint64_t(0)) != options.seed ||
-        old.value("sample", !options.sample) != options.sample ||
-        old.value("residual_hash", "") != header.value("residual_hash", ""))
+    const nlohmann::json old = nlohmann::json::parse(line, nullptr, false);
+    return !old.is_discarded() && old.value("policy_hash", "") == header["policy_hash"] &&
+           old.value("task", "") == task.name && old.value("seed", uint64_t(0)) == options.seed &&
+           old.value("sample", !options.sample) == options.sample &&
+           old.value("residual_hash", "") == header.value("residual_hash", "");
+  };
+  if (std::filesystem::exists(log) && std::filesystem::file_size(log) > 0 && !same_trials()) {
+    if (!options.set_aside_other_logs)
       throw core::Error(
           log.string() +
           ": a trial log of another policy, residual, task or protocol; give another --out or "
           "remove it");
+    std::filesystem::path previous = log;
+    previous += ".previous";
+    spdlog::info("eval: {} holds other trials; kept as {}", log.string(), previous.string());
+    std::filesystem::rename(log, previous);
+  }
+  if (std::filesystem::exists(log) && std::filesystem::file_size(log) > 0) {
+    std::ifstream in(log);
+    std::string line;
+    std::getline(in, line);
     for (int n = 2; std::getline(in, line); ++n) {
       const nlohmann::json t = nlohmann::json::parse(line, nullptr, false);
       if (t.is_discarded()) {

@@ -39,6 +39,9 @@ struct RealityEvalOptions {
   // If set: a grader's view of the scene at each trial's end (a proxy world's hidden state),
   // logged with the trial as "grader". Diagnosis only; the policy never sees it.
   std::function<nlohmann::json()> grader;
+  // A log of another policy, residual, task or protocol is renamed LOG.previous and a new one
+  // started (else it is an error).
+  bool set_aside_other_logs = false;
 };
 
 struct TrialRecord {

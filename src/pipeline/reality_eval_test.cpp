@@ -5,6 +5,7 @@
 #include <fstream>
 
 #include "core/error.h"
+#include "core/fs.h"
 #include "core/test_support.h"
 #include "learn/policy_net.h"
 #include "learn/torch_runtime.h"
@@ -79,6 +80,14 @@ TEST(EvaluateOnReality, LogsEveryTrialResumesAndRefusesAnotherPolicysLog) {
   } catch (const core::Error& e) {
     EXPECT_NE(std::string(e.what()).find("trials.jsonl"), std::string::npos) << e.what();
   }
+  // As the main job asks: the other policy's trials start a new log, the old one kept beside.
+  const auto old_log = core::ReadTextFile(dir / "trials.jsonl");
+  RealityEvalOptions aside = o;
+  aside.set_aside_other_logs = true;
+  const RealityEvalReport other =
+      EvaluateOnReality(robot, Policy(dir, 64, 2), task, aside, dir / "trials.jsonl");
+  EXPECT_EQ(other.resumed, 0);
+  EXPECT_EQ(core::ReadTextFile(dir / "trials.jsonl.previous"), old_log);
   try {
     EvaluateOnReality(robot, Policy(dir, 0, 1), task, o, dir / "state.jsonl");
     FAIL() << "a state policy ran on reality";

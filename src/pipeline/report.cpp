@@ -101,7 +101,13 @@ std::filesystem::path WriteReport(const std::filesystem::path& root) {
     h << "</tr>\n";
   }
   h << "</table>\n";
-  if (evals.empty()) h << "<p>No evaluation yet.</p>\n";
+  if (evals.empty())
+    h << "<p>No evaluation yet.</p>\n";
+  else
+    h << "<p>Moves: "
+      << (evals.front().second.value("sample", false) ? "sampled from each policy's distribution"
+                                                      : "each policy's most likely (greedy)")
+      << ". 95% bootstrap intervals.</p>\n";
 
   h << "<h2>The twin next to the scan</h2>\n";
   const bool twin_view = RenderTwinView(root, dir / "twin_view.png");
