@@ -223,10 +223,11 @@ class Job {
                                               {"success_rate", r.success_rate()},
                                               {"seconds", r.seconds}});
         });
-    // The teacher trains, and is distilled, in the twin with its physics randomized (if asked).
+    // The teacher trains, and is distilled, in the twin with its physics randomized: as its task
+    // file says if it says, else as the run's `physics` says (tasks are data).
     const std::string physics = core::ToJson(o_.physics).dump();
     auto train_task = twin_task;
-    if (o_.physics.enabled()) {
+    if (o_.physics.enabled() && !twin_task->spec().randomization.physics.enabled()) {
       sim::TaskSpec spec = twin_task->spec();
       spec.randomization.physics = o_.physics;
       train_task = std::make_shared<const sim::Task>(spec);

@@ -86,12 +86,13 @@ struct MainJobOptions {
   int rl_eval_episodes = 100;
   int rl_bc_pretrain_steps = 0;  // BC alone on the sim demos before PPO (learn::PpoOptions)
   int rl_critic_warmup = 0;
-  // Scene physics drawn per episode in the twin while the teacher trains and is distilled
-  // (sim::PhysicsRandomization; `from_level` 4 turns it off): what sysid leaves unidentified
-  // keeps the recipe's guess, and what it identifies from two task runs may still be biased
-  // (docs/calibrate.md), so the moving parts' damping, dry friction and mass are drawn from half
-  // to twice the twin's. A gripper holds with less than its rated force as its pads wear: the
-  // fingers' force is drawn from half to 1.2 times the model's.
+  // Scene physics drawn per episode in the twin while the teacher trains and is distilled, for
+  // a task whose file declares none (sim::PhysicsRandomization; `from_level` 4 turns it off).
+  // What sysid leaves unidentified keeps the recipe's guess, and what it identifies from two
+  // task runs may still be biased (docs/calibrate.md), so the moving parts' damping, dry
+  // friction and mass are drawn from half to twice the twin's. A gripper holds with less than
+  // its rated force as its pads wear: the fingers' force is drawn from half to 1.2 times the
+  // model's.
   sim::PhysicsRandomization physics = SceneUncertainty();
   learn::DistillOptions distill;
   std::vector<int> levels = {1, 2, 3};
