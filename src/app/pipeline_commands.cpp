@@ -67,6 +67,9 @@ void AddEval(CLI::App& parent, int& exit_code) {
   c->add_flag("--grader-state", cli->grader_state,
               "proxy worlds only, to diagnose failures: run the world in this process and log its "
               "hidden end state (task joints, objects, gripper, tool) with each trial");
+  c->add_option("--trace", cli->options.trace,
+                "also append every step of the trials run here (JSON lines: action, tool position, "
+                "gripper width; the hidden state too with --grader-state)");
   c->callback([cli, &exit_code] {
     cli->options.levels = cli->levels;
     const sim::TaskSpec task = sim::LoadTaskSpec(cli->task);

@@ -61,11 +61,17 @@ if grep -q "rl: resuming" "$d/fourth.log"; then
   echo "rl resumed a checkpoint made from other sim demos" >&2
   exit 1
 fi
-# Diagnosis on a proxy world: each trial's line carries the world's hidden end state. A real
-# robot's address is refused: it has none to read.
+# Diagnosis on a proxy world: each trial's line carries the world's hidden end state, and the
+# step trace one line per action sent, with the hidden state then. A real robot's address is
+# refused: it has none to read.
 "$tf" eval --policy "$d/run/policies/student.pt" --task open_drawer --reality proxy:open_drawer \
-  --levels 1 --trials 2 --grader-state --out "$d/graded.jsonl" > /dev/null 2> "$d/graded.log"
+  --levels 1 --trials 2 --grader-state --trace "$d/trace.jsonl" --out "$d/graded.jsonl" \
+  > /dev/null 2> "$d/graded.log"
 [ "$(grep -c '"grader":{.*"drawer_slide":' "$d/graded.jsonl")" -eq 2 ]
+steps=$(grep -o '"steps":[0-9]*' "$d/graded.jsonl" | awk -F: '{s += $2} END {print s + 0}')
+[ "$steps" -gt 0 ] && [ "$(wc -l < "$d/trace.jsonl")" -eq "$steps" ] ||
+  { echo "trace: $(wc -l < "$d/trace.jsonl") lines for $steps steps" >&2; exit 1; }
+[ "$(grep -c '"action":"[^"]*".*"grader":{.*"tool":\[' "$d/trace.jsonl")" -eq "$steps" ]
 if "$tf" eval --policy "$d/run/policies/student.pt" --task open_drawer \
   --reality tcp://127.0.0.1:9 --grader-state --out "$d/refused.jsonl" 2> "$d/refused.log"; then
   echo "--grader-state accepted a real robot's address" >&2

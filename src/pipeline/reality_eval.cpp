@@ -48,6 +48,12 @@ std::pair<double, double> BootstrapInterval(int successes, int trials, int resam
 
 namespace {
 
+// A discrete action by name ("+x", "close"), a continuous one by its values.
+nlohmann::json ActionJson(const sim::Action& a) {
+  if (a.mode == sim::ActionMode::kDiscrete) return sim::DiscreteActionName(a.index);
+  return a.value;
+}
+
 nlohmann::json ToJson(const TrialRecord& t) {
   nlohmann::json j = {{"level", t.level},     {"trial", t.trial}, {"seed", t.seed},
                       {"success", t.success}, {"steps", t.steps}, {"seconds", t.seconds}};
@@ -135,6 +141,12 @@ RealityEvalReport EvaluateOnReality(reality::Robot& robot, const std::filesystem
     std::ofstream(log) << header.dump() << "\n";
   }
   std::ofstream out(log, std::ios::app);
+  std::ofstream trace;
+  if (!options.trace.empty()) {
+    trace.open(options.trace, std::ios::app);
+    if (!trace)
+      throw core::IoError("eval: cannot write the step trace to " + options.trace.string());
+  }
   if (!out) throw core::IoError("cannot write " + log.string());
 
   reality::ActionClient client(robot, task.control.limits);
@@ -160,7 +172,23 @@ RealityEvalReport EvaluateOnReality(reality::Robot& robot, const std::filesystem
         reality::Observation o = robot.Reset({r.seed, level});
         client.ResetGripper();
         op.Begin(r.seed);
-        r.steps = reality::RunOperator(robot, op, client, o, task.horizon, true).actions;
+        int step = 0;
+        const reality::BeforeAct trace_step = [&](const reality::Observation& seen,
+                                                  const sim::Action& action) {
+          const core::Vec3& t = seen.ee.translation;
+          nlohmann::json j = {{"level", level},
+                              {"trial", i},
+                              {"step", step++},
+                              {"action", ActionJson(action)},
+                              {"tool", {t.x(), t.y(), t.z()}},
+                              {"gripper_width", seen.gripper_width}};
+          if (options.grader) j["grader"] = options.grader();
+          trace << j.dump() << "\n";
+        };
+        r.steps = reality::RunOperator(robot, op, client, o, task.horizon, true,
+                                       trace.is_open() ? trace_step : reality::BeforeAct())
+                      .actions;
+        if (trace.is_open()) trace << std::flush;
         const reality::SuccessAnswer answer = robot.QuerySuccess();
         r.success = answer == reality::SuccessAnswer::kUnknown
                         ? (judge ? judge(r) : false)

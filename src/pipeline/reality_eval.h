@@ -39,6 +39,10 @@ struct RealityEvalOptions {
   // If set: a grader's view of the scene at each trial's end (a proxy world's hidden state),
   // logged with the trial as "grader". Diagnosis only; the policy never sees it.
   std::function<nlohmann::json()> grader;
+  // If set: every step of every trial run (not resumed ones) appended here as JSON lines: level,
+  // trial, step, the action, the tool position and gripper width the robot reported before it,
+  // and the grader's view when `grader` is set. To see where failing trials go.
+  std::filesystem::path trace;
   // A log of another policy, residual, task or protocol is renamed LOG.previous and a new one
   // started (else it is an error).
   bool set_aside_other_logs = false;
