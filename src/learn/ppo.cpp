@@ -136,9 +136,9 @@ void WriteCurve(const std::vector<CurveRow>& rows, const std::filesystem::path& 
 // The options that change what training computes: budgets, threads and evaluation do not, so a
 // run may be resumed with those changed.
 nlohmann::json Fingerprint(nlohmann::json options) {
-  for (const char* k :
-       {"threads", "max_seconds", "max_env_steps", "max_iterations", "target_success", "eval_every",
-        "eval_episodes", "eval_seed", "eval_sample"})
+  for (const char* k : {"threads", "max_seconds", "max_env_steps", "max_iterations",
+                        "target_success", "eval_every", "eval_episodes", "eval_seed", "eval_sample",
+                        "demos"})  // a file's path, which checkpoints before stop 28 held
     options.erase(k);
   return options;
 }
@@ -154,8 +154,8 @@ nlohmann::json Fingerprint(const PpoOptions& options, const sim::Task& task,
   std::string model(mj_sizeModel(m), '\0');
   mj_saveModel(m, nullptr, model.data(), static_cast<int>(model.size()));
   j["task_content"] = core::Fingerprint().Add(core::ToJson(task.spec()).dump()).Add(model).Hex();
-  j["demos"] = demos.empty() ? "" : std::filesystem::weakly_canonical(demos).string();
-  // What the file holds, too: demos remade under the same name are other demos.
+  // What the demos file holds, not where it is: demos remade under the same name are other
+  // demos, and a run directory moved or copied elsewhere keeps its teacher's checkpoint.
   j["demos_content"] = demos.empty() ? "" : core::Fingerprint().AddFile(demos).Hex();
   return j;
 }

@@ -249,6 +249,24 @@ TEST(Ppo, ACheckpointOfOtherDemosUnderTheSameNameIsRefused) {
   }
 }
 
+// A run directory copied elsewhere resumes: the demos are the same file content under another
+// path.
+TEST(Ppo, ACheckpointResumesWithTheSameDemosMovedElsewhere) {
+  PinMathThreads(1);
+  auto task = testing::ReachTask();
+  const auto dir = core::testing::TestDir("ppo_test", "moved");
+  PpoOptions o = OneIteration();
+  const auto demos = TinyDemos(dir);
+  TrainPpo(task, demos, dir / "t.pt", o, CheckpointMode::kStartOver);
+  std::filesystem::create_directories(dir / "copy");
+  std::filesystem::copy_file(demos, dir / "copy" / demos.filename());
+  std::filesystem::copy_file(dir / "t.ckpt", dir / "copy" / "t.ckpt");
+  o.max_iterations = 2;
+  EXPECT_EQ(TrainPpo(task, dir / "copy" / demos.filename(), dir / "copy" / "t.pt", o).resumed_from,
+            1);
+  std::filesystem::remove_all(dir);
+}
+
 // BC alone before PPO: the imitation of the operator's demos succeeds where PPO's first iteration
 // without it does not. Its evaluation is the curve's row 0, and reaching the target there ends
 // the run before any rollout; resumed, it stays ended.
