@@ -32,12 +32,6 @@
 
 namespace twinforge::pipeline {
 
-inline real2sim::CalibrateOptions AdamCalibration() {
-  real2sim::CalibrateOptions c;
-  c.solver = "adam";
-  return c;
-}
-
 inline sim::PhysicsRandomization SceneUncertainty() {
   sim::PhysicsRandomization p;
   p.from_level = 0;
@@ -54,16 +48,15 @@ struct MainJobOptions {
   std::string reality;               // address (tcp://host:port or proxy:WORLD)
   std::string token;
   reality::ScanOptions scan;
-  // The main job calibrates the camera as the measured pipeline did (docs/calibrate.md): 6
-  // frames, the tool 15 cm up and 12 cm around, and Adam on depth + EMD. Gauss-Newton with the
-  // arm weighted (`twinforge calibrate`'s default) finds the true mount better, but the one run
-  // with it gave a student that scored 16 / 14 / 10 % on reality, against 44 / 52 / 48 % for the
-  // run with Adam. The likely reason: the student needs the real clouds where the twin's are,
-  // scan errors included.
-  int camera_frames = 6;  // of the fixed camera, to calibrate its pose (0: no calibration)
-  double camera_frames_height = 0.15;  // m above the camera's look-at point
-  double camera_frames_spread = 0.12;  // m
-  real2sim::CalibrateOptions calibrate = AdamCalibration();
+  // The fixed camera's frames and calibration: `scan camera`'s 16 frames (the tool 8 cm up, 25
+  // cm around) and `calibrate`'s Gauss-Newton with the arm weighted. Measured at stop 28 on the
+  // proxy drawer: the stop-27 run's Adam calibration (6 frames, 15 cm up, 12 cm around) left the
+  // camera 40 mm off, Gauss-Newton 8 mm; with nothing but the correction changed, the same
+  // student went from 46 / 36 / 32 % to 86 / 74 / 70 % on reality (greedy, 50 trials per level).
+  int camera_frames = reality::kCameraFrames;                  // 0: no calibration
+  double camera_frames_height = reality::kCameraFramesHeight;  // m above the camera's look-at point
+  double camera_frames_spread = reality::kCameraFramesSpread;  // m
+  real2sim::CalibrateOptions calibrate;
   // Identify the twin's physics on the robot (free-arm moves and two task runs, about 2 min):
   // the servo's latency and interpolation, the arm's gains and the moving parts' damping, dry
   // friction and mass, each where the runs pin it down. Measured at stop 27 on the proxy drawer:
