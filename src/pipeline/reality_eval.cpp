@@ -141,13 +141,13 @@ RealityEvalReport EvaluateOnReality(reality::Robot& robot, const std::filesystem
     std::ofstream(log) << header.dump() << "\n";
   }
   std::ofstream out(log, std::ios::app);
+  if (!out) throw core::IoError("cannot write " + log.string());
   std::ofstream trace;
   if (!options.trace.empty()) {
     trace.open(options.trace, std::ios::app);
     if (!trace)
       throw core::IoError("eval: cannot write the step trace to " + options.trace.string());
   }
-  if (!out) throw core::IoError("cannot write " + log.string());
 
   reality::ActionClient client(robot, task.control.limits);
   PolicyOperator op(robot, net, task, options.scene_points, options.arm_points, options.sample,
