@@ -164,9 +164,7 @@ void AddSimCommands(CLI::App& parent, int& exit_code) {
         joints[mj_id2name(m, mjOBJ_JOINT, j)] = d->qpos[m->jnt_qposadr[j]];
       core::Json line = {{"t", t},
                          {"expert_step", step},
-                         {"action", action.mode == sim::ActionMode::kDiscrete
-                                        ? core::Json(sim::DiscreteActionName(action.index))
-                                        : core::Json(action.value)},
+                         {"action", sim::ToJson(action)},
                          {"state", state},
                          {"joints", joints},
                          {"robot_contacts", touches},

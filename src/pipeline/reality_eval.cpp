@@ -48,12 +48,6 @@ std::pair<double, double> BootstrapInterval(int successes, int trials, int resam
 
 namespace {
 
-// A discrete action by name ("+x", "close"), a continuous one by its values.
-nlohmann::json ActionJson(const sim::Action& a) {
-  if (a.mode == sim::ActionMode::kDiscrete) return sim::DiscreteActionName(a.index);
-  return a.value;
-}
-
 nlohmann::json ToJson(const TrialRecord& t) {
   nlohmann::json j = {{"level", t.level},     {"trial", t.trial}, {"seed", t.seed},
                       {"success", t.success}, {"steps", t.steps}, {"seconds", t.seconds}};
@@ -179,7 +173,7 @@ RealityEvalReport EvaluateOnReality(reality::Robot& robot, const std::filesystem
           nlohmann::json j = {{"level", level},
                               {"trial", i},
                               {"step", step++},
-                              {"action", ActionJson(action)},
+                              {"action", sim::ToJson(action)},
                               {"tool", {t.x(), t.y(), t.z()}},
                               {"gripper_width", seen.gripper_width}};
           if (options.grader) j["grader"] = options.grader();

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <nlohmann/json.hpp>
 
 #include "core/error.h"
 
@@ -17,6 +18,11 @@ constexpr const char* kContinuousNames[kContinuousActionDim] = {"dx",     "dy", 
 
 const char* DiscreteActionName(int index) {
   return index >= 0 && index < kDiscreteActions ? kDiscreteNames[index] : "invalid";
+}
+
+nlohmann::json ToJson(const Action& a) {
+  if (a.mode == ActionMode::kDiscrete) return DiscreteActionName(a.index);
+  return a.value;
 }
 
 EeCommand DecodeAction(const Action& action, const ActionLimits& limits,

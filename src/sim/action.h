@@ -10,6 +10,7 @@
 #pragma once
 
 #include <array>
+#include <nlohmann/json_fwd.hpp>
 #include <string>
 
 #include "core/se3.h"
@@ -47,6 +48,9 @@ struct Action {
 
 // Human-readable name of a discrete action ("+x", "close", ...).
 const char* DiscreteActionName(int index);
+
+// An action as a log shows it: a discrete one by name, a continuous one by its values.
+nlohmann::json ToJson(const Action& a);
 
 // The gripper's commanded closure, 0 = open .. 1 = closed, carried between steps (latching).
 struct GripperState {
