@@ -281,6 +281,9 @@ void AddTrainCommands(CLI::App& parent, int& exit_code) {
   bc->add_option("--lr", cli->options.learning_rate, "Adam learning rate")
       ->check(CLI::Range(1e-6, 1.0));
   bc->add_option("--seed", cli->options.seed, "seed");
+  bc->add_option("--threads", cli->options.threads,
+                 "worker threads (the result does not depend on them)")
+      ->check(CLI::PositiveNumber);
   bc->callback([cli, &exit_code] {
     core::Progress progress("bc", cli->options.max_epochs, "epochs");
     const learn::BcReport r = learn::TrainBc(cli->demos, cli->out, cli->options, &progress);

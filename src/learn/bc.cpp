@@ -8,6 +8,7 @@
 #include "core/error.h"
 #include "core/log.h"
 #include "core/measure.h"
+#include "learn/data_parallel.h"
 #include "learn/policy_net.h"
 #include "sim/action.h"
 #include "sim/camera.h"
@@ -178,6 +179,7 @@ BcReport TrainBc(const std::filesystem::path& demos, const std::filesystem::path
   }
   PolicyNet net(config);
   torch::optim::Adam optimizer(net->parameters(), torch::optim::AdamOptions(options.learning_rate));
+  DataParallel parallel(net, kGradientShards, options.threads);
   const std::vector<Sample>& held_out = data.valid.empty() ? data.train : data.valid;
 
   BcReport report;
@@ -205,11 +207,15 @@ BcReport TrainBc(const std::filesystem::path& demos, const std::filesystem::path
       const std::vector<std::size_t> rows(
           order.begin() + at, order.begin() + std::min(order.size(), at + options.batch));
       const Batch b = MakeBatch(data.train, rows, options.sampling, true, data.discrete, rng);
-      const torch::Tensor loss = -net->LogProb(net->forward(b.points, b.proprio), b.actions).mean();
-      optimizer.zero_grad();
-      loss.backward();
+      const double loss = parallel.Backward(b.points.size(0), [&](PolicyNet& replica, int64_t i,
+                                                                  int64_t j) {
+        return -replica
+                    ->LogProb(replica->forward(b.points.slice(0, i, j), b.proprio.slice(0, i, j)),
+                              b.actions.slice(0, i, j))
+                    .mean();
+      });
       optimizer.step();
-      total += loss.item<double>() * double(rows.size());
+      total += loss * double(rows.size());
     }
     report.final_train_loss = total / double(order.size());
     const Scores valid = Evaluate(net, held_out, options.sampling, data.discrete);

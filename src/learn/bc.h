@@ -31,6 +31,7 @@ struct BcOptions {
   int batch = 64;
   double learning_rate = 1e-3;
   uint64_t seed = 1;
+  int threads = 2;  // the gradient's shards run side by side; the result is the same with 1
 };
 
 struct BcReport {

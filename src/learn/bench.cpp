@@ -5,6 +5,7 @@
 
 #include "core/measure.h"
 #include "core/rng.h"
+#include "learn/data_parallel.h"
 #include "learn/policy_net.h"
 #include "learn/ppo_update.h"
 #include "learn/torch_runtime.h"
@@ -107,13 +108,31 @@ nlohmann::json RunLearnBench(const LearnBenchOptions& options) {
       loss.backward();
       optimizer.step();
     });
+    // The same step as BC and distillation take it: the batch in kGradientShards shards, each on
+    // its own copy of the network, on one thread and on two.
+    const auto sharded = [&](int threads) {
+      DataParallel parallel(net, kGradientShards, threads);
+      return MedianSeconds(options.repeats, [&] {
+        parallel.Backward(B, [&](PolicyNet& r, int64_t i, int64_t j) {
+          return -r->LogProb(r->forward(points.slice(0, i, j), proprio.slice(0, i, j)),
+                             actions.slice(0, i, j))
+                      .mean();
+        });
+        optimizer.step();
+      });
+    };
+    const double one = sharded(1), two = sharded(2);
     const double flops = 3 * config.points * MlpFlops({4, 64, 128, 256});
     const double clouds = double(B) / step;
     out["bc_point_cloud"] = {{"batch", B},
                              {"points", config.points},
                              {"clouds_per_s", clouds},
                              {"gflops", clouds * flops / 1e9},
-                             {"share_of_matmul_peak", clouds * flops / 1e9 / peak}};
+                             {"share_of_matmul_peak", clouds * flops / 1e9 / peak},
+                             {"shards", kGradientShards},
+                             {"sharded_1_thread_clouds_per_s", double(B) / one},
+                             {"sharded_2_threads_clouds_per_s", double(B) / two},
+                             {"sharded_2_threads_speedup_vs_whole_batch", step / two}};
   }
   return out;
 }

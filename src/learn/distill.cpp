@@ -9,6 +9,7 @@
 #include "core/log.h"
 #include "core/measure.h"
 #include "core/thread_pool.h"
+#include "learn/data_parallel.h"
 #include "learn/policy_net.h"
 #include "learn/rollout.h"
 #include "sim/camera.h"
@@ -277,6 +278,7 @@ DistillReport TrainDistill(const std::filesystem::path& teacher_path,
   CheckPolicyFitsTask(config, *task, "the student");
   torch::optim::AdamW optimizer(student->parameters(),
                                 torch::optim::AdamWOptions(options.learning_rate));
+  DataParallel parallel(student, kGradientShards, options.threads);
 
   // Sources: the real demos first (when co-training), then one per stage as it runs.
   std::vector<DistillSource> sources;
@@ -356,14 +358,15 @@ DistillReport TrainDistill(const std::filesystem::path& teacher_path,
     for (int step = 0; step < options.train_steps; ++step) {
       const Batch b = MakeBatch(from, PlanBatch(from, options.batch, rng), options,
                                 config.proprio_dim, config.action_dim, rng);
-      const torch::Tensor loss =
-          DistillLoss(student, student->forward(b.points, b.proprio), b.targets);
-      optimizer.zero_grad();
-      loss.backward();
+      const double loss =
+          parallel.Backward(b.points.size(0), [&](PolicyNet& net, int64_t i, int64_t j) {
+            return DistillLoss(net, net->forward(b.points.slice(0, i, j), b.proprio.slice(0, i, j)),
+                               b.targets.slice(0, i, j));
+          });
       torch::nn::utils::clip_grad_norm_(student->parameters(), options.grad_clip);
       optimizer.step();
       if (step >= options.train_steps - 100) {
-        recent += loss.item<double>();
+        recent += loss;
         ++recent_n;
       }
     }

@@ -169,6 +169,7 @@ class Job {
             learn::BcOptions b;
             b.seed = o_.seed;
             b.max_epochs = o_.bc_epochs;
+            b.threads = o_.threads;
             core::Progress progress("bc", b.max_epochs, "epochs");
             const auto r = learn::TrainBc(run_ / "demos/real.hdf5", run_ / "policies/bc_real.pt", b,
                                           &progress);
