@@ -1,6 +1,5 @@
 #include "pipeline/main_job.h"
 
-#include <ctime>
 #include <fstream>
 #include <functional>
 #include <memory>
@@ -328,18 +327,22 @@ class Job {
               WriteJson(run_ / ("eval/" + policy + ".json"), j);
             });
     }
-    // The report reads whatever the run holds now: it is written every time.
-    Stage("report", Fingerprint().Add(std::to_string(std::time(nullptr))).Hex(),
-          {"eval/report.html"}, [&] { WriteReport(run_.root()); });
+    // The report reads whatever the run holds now: it is written every time. (A fingerprint of
+    // the clock made it "up to date" when two runs ended within the same second.)
+    Stage(
+        "report", "", {"eval/report.html"}, [&] { WriteReport(run_.root()); }, Rerun::kAlways);
     spdlog::info("run: done in {:.0f} min; report {}", TotalMinutes(),
                  (run_ / "eval/report.html").string());
   }
 
  private:
+  enum class Rerun { kWhenInputsChange, kAlways };
+
   void Stage(const std::string& name, const std::string& inputs,
-             const std::vector<std::string>& outputs, const std::function<void()>& body) {
+             const std::vector<std::string>& outputs, const std::function<void()>& body,
+             Rerun rerun = Rerun::kWhenInputsChange) {
     ++index_;
-    if (run_.UpToDate(name, inputs)) {
+    if (rerun == Rerun::kWhenInputsChange && run_.UpToDate(name, inputs)) {
       spdlog::info("run: stage {}/{} {}: up to date", index_, stages_, name);
       return;
     }
