@@ -216,6 +216,7 @@ void SaveCheckpoint(const std::filesystem::path& path, PpoModel& model, const Ru
   archive.write("norm_mean", torch::tensor(norm.mean, torch::kDouble));
   archive.write("norm_var", torch::tensor(norm.var, torch::kDouble));
   archive.write("norm_count", torch::tensor(norm.count, torch::kDouble));
+  archive.write("return_mean", torch::tensor(return_norm.mean, torch::kDouble));
   archive.write("return_var", torch::tensor(return_norm.var, torch::kDouble));
   archive.write("return_count", torch::tensor(return_norm.count, torch::kDouble));
   archive.write("twinforge_ppo_state", c10::IValue(state.dump()));
@@ -272,7 +273,16 @@ void RestoreCheckpoint(const std::filesystem::path& path, Checkpoint& checkpoint
       norm.var[k] = var[k].item<double>();
     }
     norm.count = count.item<double>();
-    torch::Tensor return_var, return_count;
+    torch::Tensor return_mean, return_var, return_count;
+    // The returns' mean moves their variance at every update: without it (checkpoints before
+    // stop 30 lack it) a resumed run scales its rewards differently from an uninterrupted one.
+    if (archive.try_read("return_mean", return_mean))
+      return_norm.mean[0] = return_mean[0].item<double>();
+    else
+      spdlog::warn(
+          "rl: {} holds no return mean (an older checkpoint); the run resumes, but not "
+          "exactly as it would have gone on",
+          path.string());
     archive.read("return_var", return_var);
     archive.read("return_count", return_count);
     return_norm.var[0] = return_var[0].item<double>();
