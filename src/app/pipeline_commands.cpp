@@ -137,13 +137,15 @@ void AddRun(CLI::App& parent, int& exit_code) {
   c->add_option("--trials", o.trials, "evaluation trials per level")->check(CLI::PositiveNumber);
   c->add_option("--threads", o.threads, "worker threads")->check(CLI::PositiveNumber);
   c->add_option("--seed", o.seed, "seed");
+  c->add_flag("--no-co-train{false}", o.co_train,
+              "distil the student on sim data alone, without the real demos (RialTo's ablation)");
   c->callback([cli, c, &exit_code] {
     pipeline::MainJobOptions o = cli->options;
     if (!cli->config.empty()) {
       o = core::LoadConfig<pipeline::MainJobOptions>(cli->config);
       // Flags given on the command line win over the file.
       for (const char* flag : {"--task", "--demos", "--rl-minutes", "--sim-demos", "--levels",
-                               "--trials", "--threads", "--seed"})
+                               "--trials", "--threads", "--seed", "--no-co-train"})
         if (c->count(flag)) {
           const std::string f = flag;
           if (f == "--task") o.task = cli->options.task;
@@ -154,6 +156,7 @@ void AddRun(CLI::App& parent, int& exit_code) {
           if (f == "--trials") o.trials = cli->options.trials;
           if (f == "--threads") o.threads = cli->options.threads;
           if (f == "--seed") o.seed = cli->options.seed;
+          if (f == "--no-co-train") o.co_train = cli->options.co_train;
         }
     }
     if (!cli->reality.address.empty()) o.reality = cli->reality.address;

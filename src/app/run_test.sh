@@ -2,7 +2,8 @@
 # The main job on the smoke budget (assets/runs/smoke.json): killed outright while training, then
 # run again. The finished stages are skipped, the killed one resumes, the rest run, the report and
 # both evaluations are written, and no proxy-reality server outlives its pipeline. New sim demos
-# make the teacher start over.
+# make the teacher start over. The student distilled without the real demos (RialTo's ablation)
+# reruns only distillation and the student's evaluation.
 # usage: run_test.sh TWINFORGE_BINARY SOURCE_DIR
 set -euo pipefail
 tf=$1
@@ -34,6 +35,7 @@ for stage in scan twin calibrate sysid demos bc inverse_distill; do
     { echo "stage $stage ran again" >&2; cat "$d/second.log" >&2; exit 1; }
 done
 grep -q "resum" "$d/second.log" || { echo "rl did not resume its checkpoint" >&2; exit 1; }
+grep -q "distill: co-training with [1-9][0-9]* real steps" "$d/second.log"
 for f in eval/report.html eval/student.json eval/bc_real.json eval/student.jsonl \
   policies/student.pt policies/teacher.pt eval/twin_view.png calibrated/calibration/frame_00.png \
   identified/sysid/sysid.json; do
@@ -61,6 +63,13 @@ if grep -q "rl: resuming" "$d/fourth.log"; then
   echo "rl resumed a checkpoint made from other sim demos" >&2
   exit 1
 fi
+# RialTo's ablation, from the run's own options: the student distilled without the real demos.
+# Only the distillation and what follows it run again.
+"$tf" run --config "$d/run/config.json" --out "$d/run" --no-co-train > /dev/null 2> "$d/fifth.log"
+grep -q "distill: sim data only" "$d/fifth.log"
+[ "$(grep -c 'up to date' "$d/fifth.log")" -eq 9 ] ||
+  { echo "the ablation ran more than distillation and evaluation" >&2; cat "$d/fifth.log" >&2; exit 1; }
+grep -q '"co_train": false' "$d/run/config.json"
 # Diagnosis on a proxy world: each trial's line carries the world's hidden end state, and the
 # step trace one line per action sent, with the hidden state then. A real robot's address is
 # refused: it has none to read.

@@ -293,6 +293,10 @@ DistillReport TrainDistill(const std::filesystem::path& teacher_path,
                                "-d proprioception; the teacher has " +
                                std::to_string(config.action_dim));
     report.real_steps = static_cast<long>(r.size());
+    spdlog::info("distill: co-training with {} real steps from {}", report.real_steps,
+                 real.string());
+  } else {
+    spdlog::info("distill: sim data only (no real demos to co-train with)");
   }
 
   report.curve = out;
@@ -318,6 +322,7 @@ DistillReport TrainDistill(const std::filesystem::path& teacher_path,
 
   double best = -1;
   bool saved = false;
+  bool trained = false;  // some stage had data to train on
   for (std::size_t k = 0; k < stages.size(); ++k) {
     const Stage& stage = stages[k];
     if (stage.episodes == 0) continue;
@@ -352,10 +357,20 @@ DistillReport TrainDistill(const std::filesystem::path& teacher_path,
                  sr.successes, sr.episodes, stage.dagger ? "student" : "teacher", sr.steps);
 
     std::vector<const DistillSource*> from;
-    for (const DistillSource& s : sources) from.push_back(&s);
+    bool any_data = false;
+    for (const DistillSource& s : sources) {
+      from.push_back(&s);
+      any_data = any_data || s.size() > 0;
+    }
+    // Without real demos, a teacher that succeeds in none of a stage's episodes leaves nothing to
+    // learn from yet; DAgger, which keeps every step, will.
+    if (!any_data)
+      spdlog::warn("distill: {}: no data yet (no teacher success, no real demos); no training",
+                   stage.name);
+    trained = trained || any_data;
     double recent = 0;
     int recent_n = 0;
-    for (int step = 0; step < options.train_steps; ++step) {
+    for (int step = 0; any_data && step < options.train_steps; ++step) {
       const Batch b = MakeBatch(from, PlanBatch(from, options.batch, rng), options,
                                 config.proprio_dim, config.action_dim, rng);
       const double loss =
@@ -370,7 +385,7 @@ DistillReport TrainDistill(const std::filesystem::path& teacher_path,
         ++recent_n;
       }
     }
-    sr.loss = recent / std::max(1, recent_n);
+    sr.loss = recent_n ? recent / recent_n : NAN;
     if (options.eval_episodes > 0) {
       PolicyEvalOptions eval;
       eval.episodes = options.eval_episodes;
@@ -397,6 +412,10 @@ DistillReport TrainDistill(const std::filesystem::path& teacher_path,
     if (progress) progress->Advance(1, stage.name);
   }
   if (report.stages.empty()) throw core::ConfigError("train distill", "episodes", "no stage ran");
+  if (!trained)
+    throw core::Error(
+        "distill: no data to train on: the teacher succeeded in none of its episodes, there are "
+        "no real demos and no DAgger round ran");
   if (!saved) SavePolicy(student, out);
   report.seconds = core::SecondsSince(start);
   return report;

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Core>
+#include <cmath>
 
 #include "core/dataset.h"
 #include "core/error.h"
@@ -245,6 +246,48 @@ TEST(Distill, TheStudentLearnsTheTeachersTask) {
   PolicyNet untrained(untrained_config);
   const double before = EvaluatePolicy(untrained, task, eval).success_rate();
   EXPECT_GE(best, before + 0.3) << "untrained " << before;
+}
+
+// Sim-only distillation (RialTo's ablation) from a teacher that never succeeds: the teacher's
+// stages leave nothing to learn from and train nothing, DAgger's relabelled steps do; without a
+// DAgger round there is no data at all, and the error says why.
+TEST(Distill, WithoutRealDemosOrTeacherSuccessesOnlyDAggerTrains) {
+  PinMathThreads(1);
+  auto task = testing::ReachTask(0.001);  // out of reach
+  const auto dir = core::testing::TestDir("distill_test", "no_data");
+  PolicyConfig config;
+  config.point_features = 0;
+  config.proprio_dim = sim::StateDim(*task);
+  torch::manual_seed(2);
+  PolicyNet teacher(config);
+  SavePolicy(teacher, dir / "teacher.pt");
+  DistillOptions o;
+  o.synthetic_episodes = 4;
+  o.rendered_episodes = 0;
+  o.distractor_episodes = 0;
+  o.dagger_rounds = 0;
+  o.train_steps = 5;
+  o.batch = 8;
+  o.sampling.n = 64;
+  o.hidden = 32;
+  o.scene_points = 128;
+  o.arm_points = 32;
+  o.eval_episodes = 0;
+  try {
+    TrainDistill(dir / "teacher.pt", task, "", dir / "student.pt", o);
+    FAIL() << "distilled from no data";
+  } catch (const core::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("no data to train on"), std::string::npos) << e.what();
+  }
+  o.dagger_rounds = 1;
+  o.dagger_episodes = 2;
+  const DistillReport r = TrainDistill(dir / "teacher.pt", task, "", dir / "student.pt", o);
+  ASSERT_EQ(r.stages.size(), 2u);
+  EXPECT_EQ(r.stages[0].steps, 0);
+  EXPECT_TRUE(std::isnan(r.stages[0].loss));
+  EXPECT_GT(r.stages[1].steps, 0);
+  EXPECT_TRUE(std::isfinite(r.stages[1].loss));
+  EXPECT_TRUE(std::filesystem::exists(dir / "student.pt"));
 }
 
 }  // namespace

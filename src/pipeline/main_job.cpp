@@ -276,23 +276,23 @@ class Job {
                        {"update_samples_per_s", r.update_samples_per_s},
                        {"update_share_of_matmul_peak", r.update_share_of_matmul_peak}});
           });
-    Stage("distill",
-          Fingerprint()
-              .Add(twin_hash)
-              .Add(physics)
-              .AddFile(run_ / "policies/teacher.pt")
-              .AddFile(run_ / "demos/real.hdf5")
-              .Add(core::ToJson(o_.distill).dump())
-              .Hex(),
-          {"policies/student.pt"}, [&] {
-            learn::DistillOptions d = o_.distill;
-            d.threads = o_.threads;
-            if (!discrete) d.teacher_sample = d.student_sample = false;  // mean actions, as above
-            core::Progress progress("distill", 3 + d.dagger_rounds, "stages");
-            learn::TrainDistill(run_ / "policies/teacher.pt", train_task, run_ / "demos/real.hdf5",
-                                run_ / "policies/student.pt", d, &progress);
-            progress.Finish();
-          });
+    Fingerprint distill_inputs;
+    distill_inputs.Add(twin_hash)
+        .Add(physics)
+        .AddFile(run_ / "policies/teacher.pt")
+        .AddFile(run_ / "demos/real.hdf5")
+        .Add(core::ToJson(o_.distill).dump());
+    if (!o_.co_train) distill_inputs.Add("sim only");  // co-trained runs keep their fingerprint
+    Stage("distill", distill_inputs.Hex(), {"policies/student.pt"}, [&] {
+      learn::DistillOptions d = o_.distill;
+      d.threads = o_.threads;
+      if (!discrete) d.teacher_sample = d.student_sample = false;  // mean actions, as above
+      core::Progress progress("distill", 3 + d.dagger_rounds, "stages");
+      learn::TrainDistill(run_ / "policies/teacher.pt", train_task,
+                          o_.co_train ? run_ / "demos/real.hdf5" : "", run_ / "policies/student.pt",
+                          d, &progress);
+      progress.Finish();
+    });
     for (const std::string policy : {"student", "bc_real"}) {
       RealityEvalOptions e;
       e.levels = o_.levels;

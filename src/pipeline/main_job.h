@@ -93,6 +93,9 @@ struct MainJobOptions {
   // model's.
   sim::PhysicsRandomization physics = SceneUncertainty();
   learn::DistillOptions distill;
+  // The student co-trains with the real demos (RialTo); false: sim data only, the ablation of
+  // RialTo's comparison.
+  bool co_train = true;
   std::vector<int> levels = {1, 2, 3};
   int trials = 50;  // per level, for the student and the BC baseline
   int threads = 2;
@@ -125,6 +128,7 @@ struct MainJobOptions {
     a("rl_critic_warmup", rl_critic_warmup);
     a("physics", physics);
     a("distill", distill);
+    a("co_train", co_train);
     a("levels", levels);
     a("trials", trials);
     a("threads", threads);
