@@ -107,9 +107,7 @@ TEST(Distill, CameraPoseAugmentationMovesOnlyTheScenePointsRigidly) {
 TEST(Distill, DaggerSendsTheStudentsMovesAndStoresTheTeachersLabels) {
   PinMathThreads(1);
   auto task = testing::ReachTask();
-  PolicyConfig tc;
-  tc.point_features = 0;
-  tc.proprio_dim = sim::StateDim(*task);
+  const PolicyConfig tc = testing::StatePolicyConfig(*task);
   PolicyNet teacher = ConstantPolicy(tc, 2);
   PolicyConfig sc;
   sc.points = 64;
@@ -148,11 +146,8 @@ TEST(Distill, DaggerSendsTheStudentsMovesAndStoresTheTeachersLabels) {
 TEST(Distill, TeacherRolloutsKeepOnlyTheirSuccesses) {
   PinMathThreads(1);
   auto task = testing::ReachTask(0.2);
-  PolicyConfig tc;
-  tc.point_features = 0;
-  tc.proprio_dim = sim::StateDim(*task);
   torch::manual_seed(4);
-  PolicyNet teacher(tc);
+  PolicyNet teacher(testing::StatePolicyConfig(*task));
   DistillRollout o;
   o.scene_points = 64;
   o.arm_points = 16;
@@ -255,11 +250,8 @@ TEST(Distill, WithoutRealDemosOrTeacherSuccessesOnlyDAggerTrains) {
   PinMathThreads(1);
   auto task = testing::ReachTask(0.001);  // out of reach
   const auto dir = core::testing::TestDir("distill_test", "no_data");
-  PolicyConfig config;
-  config.point_features = 0;
-  config.proprio_dim = sim::StateDim(*task);
   torch::manual_seed(2);
-  PolicyNet teacher(config);
+  PolicyNet teacher(testing::StatePolicyConfig(*task));
   SavePolicy(teacher, dir / "teacher.pt");
   DistillOptions o;
   o.synthetic_episodes = 4;

@@ -148,9 +148,7 @@ TEST(EvaluatePolicy, AStatePolicyRunsOnThePrivilegedState) {
   PinMathThreads(1);
   auto task = testing::ReachTask();
   const auto dir = core::testing::TestDir("evaluate_test", "state");
-  PolicyConfig config;
-  config.point_features = 0;
-  config.proprio_dim = sim::StateDim(*task);
+  PolicyConfig config = testing::StatePolicyConfig(*task);
   PolicyNet net(config);
   SavePolicy(net, dir / "state.pt");
   PolicyEvalOptions o;

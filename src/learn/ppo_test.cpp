@@ -106,11 +106,8 @@ void ExpectSameWeights(const std::filesystem::path& a, const std::filesystem::pa
 // Sim demos for the BC loss, from an untrained sampled state policy on the tiny task.
 std::filesystem::path TinyDemos(const std::filesystem::path& dir, int successes = 2) {
   auto task = testing::ReachTask();
-  PolicyConfig config;
-  config.point_features = 0;
-  config.proprio_dim = sim::StateDim(*task);
   torch::manual_seed(3);
-  PolicyNet net(config);
+  PolicyNet net(testing::StatePolicyConfig(*task));
   SavePolicy(net, dir / "random.pt");
   InverseDistillOptions o;
   o.rollout.sample = true;
