@@ -136,6 +136,9 @@ void AddDistill(CLI::App& train, int& exit_code) {
       ->check(CLI::PositiveNumber);
   c->add_option("--eval-episodes", o.eval_episodes,
                 "the student's episodes in the twin after each stage (0: none)");
+  c->add_option("--real-weight", o.real_weight,
+                "the real demos' share of each batch relative to each sim source's (1: equal)")
+      ->check(CLI::Range(1e-3, 1e3));
   c->add_option("--lr", o.learning_rate, "AdamW learning rate")->check(CLI::Range(1e-6, 1.0));
   c->add_option("--points", o.sampling.n, "points the student sees")->check(CLI::Range(16, 8192));
   c->add_option("--level", o.level, "randomization level 0..3")->check(CLI::Range(0, 3));

@@ -3,6 +3,7 @@
 #include <Eigen/Geometry>
 #include <cmath>
 #include <fstream>
+#include <numeric>
 
 #include "core/dataset.h"
 #include "core/error.h"
@@ -41,18 +42,40 @@ void DistillSource::Append(const DistillSource& other) {
 }
 
 std::vector<std::pair<int, std::size_t>> PlanBatch(const std::vector<const DistillSource*>& sources,
-                                                   int batch, core::Rng& rng) {
+                                                   int batch, core::Rng& rng,
+                                                   const std::vector<double>& weights) {
+  if (!weights.empty() && weights.size() != sources.size())
+    throw core::Error("distill: " + std::to_string(weights.size()) + " batch weights for " +
+                      std::to_string(sources.size()) + " sources");
   std::vector<int> filled;
+  double total = 0;
   for (int s = 0; s < int(sources.size()); ++s)
-    if (sources[s]->size() > 0) filled.push_back(s);
+    if (sources[s]->size() > 0) {
+      filled.push_back(s);
+      total += weights.empty() ? 1.0 : weights[s];
+    }
   if (filled.empty()) throw core::Error("distill: no data to train on");
+  // Whole rows first, then the rest by largest remainder (ties to the earlier source).
+  const int k = static_cast<int>(filled.size());
+  std::vector<int> share(k);
+  std::vector<double> rest(k);
+  int given = 0;
+  for (int i = 0; i < k; ++i) {
+    const double exact = batch * (weights.empty() ? 1.0 : weights[filled[i]]) / total;
+    share[i] = static_cast<int>(std::floor(exact + 1e-9));
+    rest[i] = exact - share[i];
+    given += share[i];
+  }
+  std::vector<int> order(k);
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(),
+                   [&](int a, int b) { return rest[a] > rest[b] + 1e-9; });
+  for (int i = 0; given < batch; ++i, ++given) ++share[order[i % k]];
   std::vector<std::pair<int, std::size_t>> rows;
   rows.reserve(batch);
-  const int k = static_cast<int>(filled.size());
   for (int i = 0; i < k; ++i) {
-    const int share = batch / k + (i < batch % k ? 1 : 0);
     const DistillSource& source = *sources[filled[i]];
-    for (int r = 0; r < share; ++r)
+    for (int r = 0; r < share[i]; ++r)
       rows.emplace_back(filled[i], static_cast<std::size_t>(rng.Index(source.size())));
   }
   return rows;
@@ -293,8 +316,11 @@ DistillReport TrainDistill(const std::filesystem::path& teacher_path,
                                "-d proprioception; the teacher has " +
                                std::to_string(config.action_dim));
     report.real_steps = static_cast<long>(r.size());
-    spdlog::info("distill: co-training with {} real steps from {}", report.real_steps,
-                 real.string());
+    spdlog::info(
+        "distill: co-training with {} real steps from {} ({})", report.real_steps, real.string(),
+        options.real_weight == 1.0
+            ? std::string("an equal share of each batch")
+            : fmt::format("{:g} of a sim source's share of each batch", options.real_weight));
   } else {
     spdlog::info("distill: sim data only (no real demos to co-train with)");
   }
@@ -357,9 +383,12 @@ DistillReport TrainDistill(const std::filesystem::path& teacher_path,
                  sr.successes, sr.episodes, stage.dagger ? "student" : "teacher", sr.steps);
 
     std::vector<const DistillSource*> from;
+    std::vector<double> weights;  // the real demos' relative share
     bool any_data = false;
     for (const DistillSource& s : sources) {
+      const bool is_real = !real.empty() && from.empty();  // the real demos come first
       from.push_back(&s);
+      weights.push_back(is_real ? options.real_weight : 1.0);
       any_data = any_data || s.size() > 0;
     }
     // Without real demos, a teacher that succeeds in none of a stage's episodes leaves nothing to
@@ -371,7 +400,7 @@ DistillReport TrainDistill(const std::filesystem::path& teacher_path,
     double recent = 0;
     int recent_n = 0;
     for (int step = 0; any_data && step < options.train_steps; ++step) {
-      const Batch b = MakeBatch(from, PlanBatch(from, options.batch, rng), options,
+      const Batch b = MakeBatch(from, PlanBatch(from, options.batch, rng, weights), options,
                                 config.proprio_dim, config.action_dim, rng);
       const double loss =
           parallel.Backward(b.points.size(0), [&](PolicyNet& net, int64_t i, int64_t j) {

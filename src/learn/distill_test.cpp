@@ -57,7 +57,7 @@ TEST(Distill, CoTrainingBatchesHoldEqualSharesOfEverySource) {
   core::Rng rng(3);
   for (int batch : {63, 64}) {
     std::vector<int> count(sources.size(), 0);
-    for (const auto& [source, row] : PlanBatch(sources, batch, rng)) {
+    for (const auto& [source, row] : PlanBatch(sources, batch, rng)) {  // equal weights
       ++count[source];
       EXPECT_LT(row, sources[source]->size());
     }
@@ -69,6 +69,21 @@ TEST(Distill, CoTrainingBatchesHoldEqualSharesOfEverySource) {
   }
   const DistillSource empty = Filled("x", 0);
   EXPECT_THROW(PlanBatch({&empty}, 8, rng), core::Error);
+}
+
+// A real weight below 1 gives the real demos that fraction of a sim source's share.
+TEST(Distill, ARealWeightScalesTheRealDemosShare) {
+  const DistillSource real = Filled("real", 15), sim = Filled("synthetic", 5000),
+                      dagger = Filled("dagger", 300);
+  const std::vector<const DistillSource*> sources = {&real, &sim, &dagger};
+  core::Rng rng(4);
+  std::vector<int> count(sources.size(), 0);
+  // 0.25 / 2.25 of 64 rows is 7.1: 7 real rows, 28.4 -> 28 or 29 for each sim source.
+  for (const auto& [source, row] : PlanBatch(sources, 64, rng, {0.25, 1.0, 1.0})) ++count[source];
+  EXPECT_EQ(count[0], 7);
+  EXPECT_EQ(count[0] + count[1] + count[2], 64);
+  EXPECT_LE(std::abs(count[1] - count[2]), 1);
+  EXPECT_THROW(PlanBatch(sources, 64, rng, {1.0}), core::Error);
 }
 
 // The camera-pose augmentation moves the scene's points rigidly and leaves the arm's.
