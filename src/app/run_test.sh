@@ -14,12 +14,16 @@ trap 'rm -rf "$d"' EXIT
 trap 'echo "run_test.sh: line $LINENO failed" >&2; tail -n 20 "$d"/*.log >&2' ERR
 "$tf" run --config "$src/assets/runs/smoke.json" --out "$d/run" 2> "$d/first.log" &
 pid=$!
-# Kill once the teacher's training has started (its checkpoint is written every iteration).
-for _ in $(seq 1 600); do
+# Kill once the teacher's training has started (its checkpoint is written every iteration). On a
+# loaded machine the stages before it can take minutes: wait up to 5, and never kill earlier
+# (a kill before the teacher starts would leave inverse distillation to run again).
+for _ in $(seq 1 3000); do
   [ -f "$d/run/policies/teacher.ckpt" ] && break
   kill -0 $pid 2> /dev/null || { cat "$d/first.log" >&2; echo "the run ended early" >&2; exit 1; }
   sleep 0.1
 done
+[ -f "$d/run/policies/teacher.ckpt" ] ||
+  { kill -9 $pid; cat "$d/first.log" >&2; echo "the teacher did not start in 5 min" >&2; exit 1; }
 kill -9 $pid
 wait $pid 2> /dev/null || true
 sleep 0.5
