@@ -55,7 +55,8 @@ std::vector<std::pair<int, std::size_t>> PlanBatch(const std::vector<const Disti
       total += weights.empty() ? 1.0 : weights[s];
     }
   if (filled.empty()) throw core::Error("distill: no data to train on");
-  // Whole rows first, then the rest by largest remainder (ties to the earlier source).
+  // Whole rows first, then the rest by largest remainder (ties to the earlier source: sources
+  // of the same weight get bit-identical remainders, so no tolerance is needed to see a tie).
   const int k = static_cast<int>(filled.size());
   std::vector<int> share(k);
   std::vector<double> rest(k);
@@ -68,8 +69,7 @@ std::vector<std::pair<int, std::size_t>> PlanBatch(const std::vector<const Disti
   }
   std::vector<int> order(k);
   std::iota(order.begin(), order.end(), 0);
-  std::stable_sort(order.begin(), order.end(),
-                   [&](int a, int b) { return rest[a] > rest[b] + 1e-9; });
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return rest[a] > rest[b]; });
   for (int i = 0; given < batch; ++i, ++given) ++share[order[i % k]];
   std::vector<std::pair<int, std::size_t>> rows;
   rows.reserve(batch);
