@@ -500,6 +500,8 @@ CameraCalibration CalibrateCamera(const sim::TaskSpec& twin_task, const core::Sc
       double loss = 0;
       std::vector<double> curve;
       const Vector6 delta = GaussNewton(frames, options, start, &loss, &curve, progress);
+      spdlog::debug("calibrate: a start ends at loss {:.6e}, [{:.1f} {:.1f} {:.1f}] mm", loss,
+                    1e3 * delta[3], 1e3 * delta[4], 1e3 * delta[5]);
       if (loss < best) {
         best = loss;
         out.correction = ApplyDelta(core::Pose::Identity(), ToTensor6(delta));

@@ -79,15 +79,23 @@ core::Pose TrueCorrection(const std::string& world) {
 TEST(CalibrateCamera, GaussNewtonFindsTheMountWithinAFewMillimetres) {
   learn::PinMathThreads(1);
   const auto dir = core::testing::TestDir("calibrate_gn");
-  const core::Scan frames = DrawerFrames(dir / "frames", 8);
+  const core::Scan frames = DrawerFrames(dir / "frames", 16);
   const sim::TaskSpec twin =
       sim::LoadTaskSpec((reality::ResolveWorldDir("open_drawer") / "task.yaml").string());
   const CameraCalibration c = CalibrateCamera(twin, frames, {});
   const core::Pose truth = TrueCorrection("open_drawer");
   ASSERT_GT(truth.translation.norm(), 0.02);  // the start: 21.7 mm and 2.5 deg off
   const core::Pose error = c.correction.Inverse() * truth;
-  // Measured: 6.3 mm and 0.5 deg (Adam on depth + EMD from frames like these: 23 mm).
-  EXPECT_LT(error.translation.norm(), 0.010);
+  const core::Pose icp_error = c.icp_correction.Inverse() * truth;
+  std::printf("camera error: ours %.2f mm %.3f deg, ICP %.2f mm %.3f deg\n",
+              1e3 * error.translation.norm(),
+              core::AngleBetween(error.rotation, core::Quat::Identity()) * 180 / M_PI,
+              1e3 * icp_error.translation.norm(),
+              core::AngleBetween(icp_error.rotation, core::Quat::Identity()) * 180 / M_PI);
+  // The target: 5 mm and 1 deg. Measured: 2.95 mm and 0.30 deg (8 frames: 4.7 mm;
+  // Gauss-Newton with soft edges of 0.3 px and 600-triangle meshes, 8 frames: 6.3 mm; Adam on
+  // depth + EMD: 23 mm). ICP is lost on this scene (38 mm): the world's own meshes, decimated.
+  EXPECT_LT(error.translation.norm(), 0.005);
   EXPECT_LT(core::AngleBetween(error.rotation, core::Quat::Identity()), 1.0 * M_PI / 180);
   EXPECT_LT(c.loss.back(), c.loss.front());
   // The sensor's noise against the world's hidden one: half the returns lost at depth edges,
