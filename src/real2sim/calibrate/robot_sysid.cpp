@@ -17,11 +17,10 @@ namespace {
 constexpr int kLevel = 0;
 constexpr uint64_t kSeed = 0;
 
-// The values below are searched as one vector: servo (2), arm scales (3), then the scene's.
-constexpr int kControllerValues = 5;
-
+// The controller's values, searched as one vector: servo (2), arm scales (4).
 std::vector<double> ControllerVector(const RobotPhysics& p) {
-  return {p.servo.interpolation, p.servo.latency, p.arm.kp, p.arm.kd, p.arm.frictionloss};
+  return {p.servo.interpolation, p.servo.latency, p.arm.kp, p.arm.kd,
+          p.arm.frictionloss,    p.arm.damping};
 }
 
 void SetController(RobotPhysics& p, const std::vector<double>& v) {
@@ -30,6 +29,17 @@ void SetController(RobotPhysics& p, const std::vector<double>& v) {
   p.arm.kp = v[2];
   p.arm.kd = v[3];
   p.arm.frictionloss = v[4];
+  p.arm.damping = v[5];
+}
+
+// A controller vector without its latency (index 1), and back.
+std::vector<double> WithoutLatency(std::vector<double> v) {
+  v.erase(v.begin() + 1);
+  return v;
+}
+std::vector<double> WithLatency(std::vector<double> v, double latency) {
+  v.insert(v.begin() + 1, latency);
+  return v;
 }
 
 }  // namespace
@@ -185,40 +195,68 @@ RobotSysidResult IdentifyRobotPhysics(const sim::TaskSpec& twin,
   if (!free_moves.empty()) {
     const double dt = twin.control.timestep;
     const double period = twin.control.substeps * dt;
-    const std::vector<double> lower{0.01, 0.001, 0.25, 0.25, 0.25},
-        upper{1.0, std::min(0.1, period - 1e-9), 4, 4, 4};
+    const std::vector<double> lower{0.01, 0.001, 0.25, 0.25, 0.25, 0.25},
+        upper{1.0, std::min(0.1, period - 1e-9), 4, 4, 4, 4};
     auto residuals = [&](const std::vector<double>& v) {
       RobotPhysics p = physics;
       SetController(p, v);
       tick("controller");
       return replay.Residuals(p, scene, free_moves);
     };
-    LeastSquaresResult fit = LeastSquaresLogSpace(residuals, ControllerVector(physics), lower,
-                                                  upper, options.controller);
+    // First with the joints' damping held at the twin's: it acts nearly as kd does, and left
+    // free from the start the fit can slide into a valley of high kp and short latency.
+    const double damping = physics.arm.damping;
+    auto held_damping = [damping](std::vector<double> v) {
+      v.push_back(damping);
+      return v;
+    };
+    auto drop_damping = [](std::vector<double> v) {
+      v.pop_back();
+      return v;
+    };
+    LeastSquaresResult fit = LeastSquaresLogSpace(
+        [&](const std::vector<double>& v) { return residuals(held_damping(v)); },
+        drop_damping(ControllerVector(physics)), drop_damping(lower), drop_damping(upper),
+        options.controller);
     r.replays += fit.replays;
     // The fit bends where the latency crosses a whole physics step, and can stall there: refit
-    // the other four with the latency held at the nearest whole steps (none included) and keep
+    // the others with the latency held at the nearest whole steps (none included) and keep
     // the best.
     const int nearest = static_cast<int>(std::lround(fit.values[1] / dt));
     for (int steps = std::max(0, nearest - 1); steps <= nearest + 1; ++steps) {
       const double latency = steps * dt;
       if (latency > upper[1]) break;
-      auto with_latency = [&](const std::vector<double>& four) {
-        return std::vector<double>{four[0], latency, four[1], four[2], four[3]};
-      };
-      const std::vector<double> others{fit.values[0], fit.values[2], fit.values[3], fit.values[4]};
       LeastSquaresResult held = LeastSquaresLogSpace(
-          [&](const std::vector<double>& four) { return residuals(with_latency(four)); }, others,
-          {lower[0], lower[2], lower[3], lower[4]}, {upper[0], upper[2], upper[3], upper[4]},
-          options.controller);
+          [&](const std::vector<double>& others) {
+            return residuals(held_damping(WithLatency(others, latency)));
+          },
+          WithoutLatency(fit.values), drop_damping(WithoutLatency(lower)),
+          drop_damping(WithoutLatency(upper)), options.controller);
       r.replays += held.replays;
       if (!held.error.empty() && held.error.back() < fit.error.back()) {
-        fit.values = with_latency(held.values);
+        fit.values = WithLatency(held.values, latency);
         fit.error = held.error;
-        fit.relative_error = with_latency(held.relative_error);
+        fit.relative_error = WithLatency(held.relative_error, latency);
         // To within half a step.
         fit.relative_error[1] = 0.5 * dt / std::max(latency, dt);
       }
+    }
+    fit.values = held_damping(fit.values);
+    fit.relative_error = held_damping(fit.relative_error);
+    // Then the damping too, from there, the latency held. A model whose joints are damped
+    // otherwise than the twin's cannot match it with kd alone, and the few tenths of a percent
+    // left bias the scene's values by tens of percent (docs/calibrate.md).
+    const double latency = fit.values[1];
+    const LeastSquaresResult last = LeastSquaresLogSpace(
+        [&](const std::vector<double>& others) { return residuals(WithLatency(others, latency)); },
+        WithoutLatency(fit.values), WithoutLatency(lower), WithoutLatency(upper),
+        options.controller);
+    r.replays += last.replays;
+    if (!last.error.empty() && last.error.back() < fit.error.back()) {
+      const double latency_error = fit.relative_error[1];
+      fit.values = WithLatency(last.values, latency);
+      fit.error.insert(fit.error.end(), last.error.begin(), last.error.end());
+      fit.relative_error = WithLatency(last.relative_error, latency_error);
     }
     SetController(physics, fit.values);
     r.controller_curve = fit.error;
@@ -273,10 +311,13 @@ core::Json ToJson(const RobotSysidResult& r) {
     core::Json scene = core::Json::object();
     for (size_t i = 0; i < r.scene.size(); ++i)
       scene[std::string(ToString(r.scene[i].kind)) + ":" + r.scene[i].name] = p.scene[i];
-    return core::Json{
-        {"servo", core::ToJson(p.servo)},
-        {"arm_scales", {{"kp", p.arm.kp}, {"kd", p.arm.kd}, {"frictionloss", p.arm.frictionloss}}},
-        {"scene", scene}};
+    return core::Json{{"servo", core::ToJson(p.servo)},
+                      {"arm_scales",
+                       {{"kp", p.arm.kp},
+                        {"kd", p.arm.kd},
+                        {"frictionloss", p.arm.frictionloss},
+                        {"damping", p.arm.damping}}},
+                      {"scene", scene}};
   };
   auto rms_deg = [](double mse) { return std::sqrt(mse) * 180 / M_PI; };
   return {{"start", physics(r.start)},

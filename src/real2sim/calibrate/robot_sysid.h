@@ -103,7 +103,8 @@ struct RobotSysidResult {
   // How well the runs pin each value down: the relative standard error from the fit's curvature
   // (Gauss-Newton, log space). A scene value whose error exceeds `max_relative_error` is not
   // identified and keeps the twin's.
-  std::vector<double> controller_relative_error;  // interpolation, latency, kp, kd, friction
+  // interpolation, latency, kp, kd, friction, joint damping
+  std::vector<double> controller_relative_error;
   std::vector<double> scene_fitted, scene_relative_error;
   // With two task runs or more: each run's own fit (one row per run). A value the rows
   // disagree on by more than `max_relative_error` of the joint fit is not identified.
@@ -113,10 +114,10 @@ struct RobotSysidResult {
 };
 
 // Fits the controller to `free_moves` (starting from the twin's `control.servo` and
-// `arm_scales`; the joint-damping scale is kept, it acts as kd does), then `scene` (starting from
-// the twin's values) to `task_runs` with that controller. Either list may be empty (that stage
-// is skipped).
-// `identified.scene` holds the fitted values where they are identified, the twin's elsewhere.
+// `arm_scales`: the joints' damping scale too, which acts nearly as kd does), then `scene`
+// (starting from the twin's values) to `task_runs` with that controller. Either list may be empty
+// (that stage is skipped). `identified.scene` holds the fitted values where they are identified,
+// the twin's elsewhere.
 RobotSysidResult IdentifyRobotPhysics(const sim::TaskSpec& twin,
                                       const std::vector<PhysicalParameter>& scene,
                                       const std::vector<RobotTrajectory>& free_moves,
