@@ -51,6 +51,8 @@ const char* ToString(PhysicalParameter::Kind kind) {
       return "joint_friction";
     case PhysicalParameter::Kind::kActuatorGain:
       return "actuator_gain";
+    case PhysicalParameter::Kind::kActuatorForce:
+      return "actuator_force";
   }
   return "?";
 }
@@ -68,6 +70,10 @@ double GetParameter(const mjModel* m, const PhysicalParameter& p) {
       return m->dof_frictionloss[m->jnt_dofadr[Find(m, mjOBJ_JOINT, p)]];
     case K::kActuatorGain:
       return m->actuator_gainprm[mjNGAIN * Find(m, mjOBJ_ACTUATOR, p)];
+    case K::kActuatorForce: {
+      const int a = Find(m, mjOBJ_ACTUATOR, p);
+      return m->actuator_forcelimited[a] ? m->actuator_forcerange[2 * a + 1] : HUGE_VAL;
+    }
   }
   return 0;
 }
@@ -96,6 +102,13 @@ void SetParameter(mjModel* m, const PhysicalParameter& p, double value) {
       const int a = Find(m, mjOBJ_ACTUATOR, p);
       m->actuator_gainprm[mjNGAIN * a] = value;
       m->actuator_biasprm[mjNBIAS * a + 1] = -value;
+      break;
+    }
+    case K::kActuatorForce: {
+      const int a = Find(m, mjOBJ_ACTUATOR, p);
+      m->actuator_forcelimited[a] = 1;
+      m->actuator_forcerange[2 * a] = -value;
+      m->actuator_forcerange[2 * a + 1] = value;
       break;
     }
   }

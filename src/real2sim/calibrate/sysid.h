@@ -26,6 +26,7 @@ struct PhysicalParameter {
     kJointDamping,   // joint `name`'s damping
     kJointFriction,  // joint `name`'s dry friction (frictionloss)
     kActuatorGain,   // position actuator `name`'s stiffness kp (gain and bias together)
+    kActuatorForce,  // actuator `name`'s force limit (symmetric; a gripper's grip force)
   } kind = Kind::kGeomFriction;
   std::string name;
   double lower = 1e-4, upper = 1e4;  // the search stays within

@@ -84,5 +84,17 @@ TEST(Sysid, MassAndActuatorGainAreSetWhereMujocoReadsThem) {
                core::ConfigError);
 }
 
+TEST(Sysid, AForceLimitCapsWhatTheActuatorPushes) {
+  sim::ModelPtr m = sim::LoadModelFromText(kPush);
+  const PhysicalParameter force{PhysicalParameter::Kind::kActuatorForce, "push"};
+  EXPECT_EQ(GetParameter(m.get(), force), HUGE_VAL);  // not limited in the model
+  SetParameter(m.get(), force, 5);
+  EXPECT_DOUBLE_EQ(GetParameter(m.get(), force), 5);
+  sim::DataPtr d = sim::MakeData(m.get());
+  d->ctrl[0] = 0.2;  // kp 3000 x 0.2 m: 600 N unlimited
+  mj_step(m.get(), d.get());
+  EXPECT_NEAR(d->actuator_force[0], 5, 1e-9);
+}
+
 }  // namespace
 }  // namespace twinforge::real2sim
