@@ -242,10 +242,11 @@ RobotSysidResult IdentifyRobotPhysics(const sim::TaskSpec& twin,
       }
     }
     fit.values = held_damping(fit.values);
-    fit.relative_error = held_damping(fit.relative_error);
     // Then the damping too, from there, the latency held. A model whose joints are damped
     // otherwise than the twin's cannot match it with kd alone, and the few tenths of a percent
-    // left bias the scene's values by tens of percent (docs/calibrate.md).
+    // left bias the scene's values by tens of percent (docs/calibrate.md). Its error bars are
+    // the ones reported, for the damping as for the rest (where it did not move, at the same
+    // values).
     const double latency = fit.values[1];
     const LeastSquaresResult last = LeastSquaresLogSpace(
         [&](const std::vector<double>& others) { return residuals(WithLatency(others, latency)); },
@@ -253,11 +254,10 @@ RobotSysidResult IdentifyRobotPhysics(const sim::TaskSpec& twin,
         options.controller);
     r.replays += last.replays;
     if (!last.error.empty() && last.error.back() < fit.error.back()) {
-      const double latency_error = fit.relative_error[1];
       fit.values = WithLatency(last.values, latency);
       fit.error.insert(fit.error.end(), last.error.begin(), last.error.end());
-      fit.relative_error = WithLatency(last.relative_error, latency_error);
     }
+    fit.relative_error = WithLatency(last.relative_error, fit.relative_error[1]);
     SetController(physics, fit.values);
     r.controller_curve = fit.error;
     r.controller_relative_error = fit.relative_error;
