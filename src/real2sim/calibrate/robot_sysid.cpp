@@ -311,13 +311,8 @@ core::Json ToJson(const RobotSysidResult& r) {
     core::Json scene = core::Json::object();
     for (size_t i = 0; i < r.scene.size(); ++i)
       scene[std::string(ToString(r.scene[i].kind)) + ":" + r.scene[i].name] = p.scene[i];
-    return core::Json{{"servo", core::ToJson(p.servo)},
-                      {"arm_scales",
-                       {{"kp", p.arm.kp},
-                        {"kd", p.arm.kd},
-                        {"frictionloss", p.arm.frictionloss},
-                        {"damping", p.arm.damping}}},
-                      {"scene", scene}};
+    return core::Json{
+        {"servo", core::ToJson(p.servo)}, {"arm_scales", core::ToJson(p.arm)}, {"scene", scene}};
   };
   auto rms_deg = [](double mse) { return std::sqrt(mse) * 180 / M_PI; };
   return {{"start", physics(r.start)},
