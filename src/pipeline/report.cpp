@@ -171,9 +171,10 @@ std::filesystem::path WriteReport(const std::filesystem::path& root) {
     for (const char* key : {"latency", "interpolation"})
       row(std::string("servo ") + key, start["servo"][key].get<double>(),
           found["servo"][key].get<double>());
-    for (const char* key : {"kp", "kd", "frictionloss"})
-      row(std::string("arm ") + key + " scale", start["arm_scales"][key].get<double>(),
-          found["arm_scales"][key].get<double>());
+    for (const char* key : {"kp", "kd", "damping", "frictionloss"})
+      if (found["arm_scales"].contains(key))  // (sysid before stop 31 did not write the damping)
+        row(std::string("arm ") + key + " scale", start["arm_scales"][key].get<double>(),
+            found["arm_scales"][key].get<double>());
     for (const auto& [name, value] : start["scene"].items())
       row(name, value.get<double>(), found["scene"][name].get<double>());
     h << "</table><p>A scene value the task runs do not pin down keeps the twin's.</p>\n";
