@@ -11,6 +11,7 @@
 #include "real2sim/twin_spec.h"
 #include "reality/proxy_reality.h"
 #include "sim/camera.h"
+#include "sim/geom_scene.h"
 
 namespace twinforge::pipeline {
 
@@ -118,10 +119,30 @@ TwinScore ScoreTwin(const std::filesystem::path& twin_dir, const std::filesystem
     auto mine = [&](int g) {
       return sim::InSubtree(m, m->geom_bodyid[g], root) && sim::GeomRgba(m, g)[3] > 0;
     };
+    // The world's surface as triangles, for exact distances to it.
+    real2sim::Mesh world_mesh;
+    for (int g = 0; g < m->ngeom; ++g) {
+      if (!mine(g)) continue;
+      const sim::TriangleMesh t = sim::TessellateGeom(m, g);
+      const auto scale = t.unit ? sim::UnitShapeScale(m, g) : std::array<double, 3>{1, 1, 1};
+      const Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> r(d->geom_xmat + 9 * g);
+      const Eigen::Map<const Eigen::Vector3d> x(d->geom_xpos + 3 * g);
+      real2sim::Mesh piece;
+      for (std::size_t i = 0; i + 2 < t.vertices.size(); i += 3)
+        piece.vertices.push_back(base_inv *
+                                 Eigen::Vector3d(r * Eigen::Vector3d(t.vertices[i] * scale[0],
+                                                                     t.vertices[i + 1] * scale[1],
+                                                                     t.vertices[i + 2] * scale[2]) +
+                                                 x));
+      for (std::size_t i = 0; i + 2 < t.triangles.size(); i += 3)
+        piece.triangles.emplace_back(t.triangles[i], t.triangles[i + 1], t.triangles[i + 2]);
+      real2sim::AppendMesh(world_mesh, piece);
+    }
     const sim::SurfaceSampler sampler(m, ~0u, options.density, 16, 200000, mine);
     std::vector<float> xyz(3 * std::size_t(sampler.capacity()));
     const int n = sampler.Transform(m, d, env.base(), everywhere, xyz.data());
     Points full, visible, twin_points;
+    real2sim::Mesh twin_mesh;
     for (int i = 0; i < n; ++i) full.emplace_back(xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]);
     for (const auto& [g, p] : seen)
       if (mine(g)) visible.push_back(p);
@@ -134,13 +155,25 @@ TwinScore ScoreTwin(const std::filesystem::path& twin_dir, const std::filesystem
             if (!box.hidden) real2sim::AppendMesh(mesh, real2sim::BoxMesh(box));
           const int count = std::max(100, int(mesh.Area() * options.density));
           const Points p = real2sim::SampleSurface(mesh, count, 7);
+          real2sim::AppendMesh(twin_mesh, mesh);
           twin_points.insert(twin_points.end(), p.begin(), p.end());
           o.found = true;
         }
     if (o.found && !full.empty() && !visible.empty()) {
-      o.accuracy_mm = 1000 * Mean(real2sim::NearestDistances(twin_points, full));
-      o.completeness_mm = 1000 * Mean(real2sim::NearestDistances(visible, twin_points));
+      o.accuracy_mm = 1000 * Mean(real2sim::SurfaceDistances(twin_points, world_mesh));
+      o.completeness_mm = 1000 * Mean(real2sim::SurfaceDistances(visible, twin_mesh));
       o.chamfer_mm = 0.5 * (o.accuracy_mm + o.completeness_mm);
+      if (getenv("ZZ_DUMP")) {  // ZZDIAG
+        const auto acc = real2sim::NearestDistances(twin_points, full);
+        FILE* f = fopen((std::string(getenv("ZZ_DUMP")) + name + ".txt").c_str(), "w");
+        for (std::size_t i = 0; i < acc.size(); ++i)
+          fprintf(f, "t %f %f %f %f\n", twin_points[i].x(), twin_points[i].y(), twin_points[i].z(),
+                  acc[i]);
+        const auto comp = real2sim::NearestDistances(visible, twin_points);
+        for (std::size_t i = 0; i < comp.size(); ++i)
+          fprintf(f, "v %f %f %f %f\n", visible[i].x(), visible[i].y(), visible[i].z(), comp[i]);
+        fclose(f);
+      }
       const core::Pose fix = real2sim::AlignPoints(twin_points, full, 0.02);
       // How far the fix moves the twin's own centre (its translation alone would count a turn
       // about the robot's base as a shift).

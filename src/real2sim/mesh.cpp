@@ -1,6 +1,7 @@
 #include "real2sim/mesh.h"
 
 #include <open3d/Open3D.h>
+#include <open3d/t/geometry/RaycastingScene.h>
 
 #include <numeric>
 #include <tuple>
@@ -102,6 +103,26 @@ std::vector<double> NearestDistances(const std::vector<Eigen::Vector3d>& from,
   std::vector<double> d2(1);
   for (std::size_t i = 0; i < from.size(); ++i)
     if (tree.SearchKNN(from[i], 1, index, d2) == 1) distances[i] = std::sqrt(d2[0]);
+  return distances;
+}
+
+std::vector<double> SurfaceDistances(const std::vector<Eigen::Vector3d>& points, const Mesh& mesh) {
+  std::vector<double> distances(points.size(), std::numeric_limits<double>::infinity());
+  if (mesh.empty() || points.empty()) return distances;
+  namespace o3c = open3d::core;
+  std::vector<float> v, q;
+  std::vector<uint32_t> t;
+  for (const auto& x : mesh.vertices) v.insert(v.end(), {float(x.x()), float(x.y()), float(x.z())});
+  for (const auto& f : mesh.triangles)
+    t.insert(t.end(), {uint32_t(f[0]), uint32_t(f[1]), uint32_t(f[2])});
+  for (const auto& x : points) q.insert(q.end(), {float(x.x()), float(x.y()), float(x.z())});
+  open3d::t::geometry::RaycastingScene scene;
+  scene.AddTriangles(o3c::Tensor(v, {int64_t(mesh.vertices.size()), 3}, o3c::Float32),
+                     o3c::Tensor(t, {int64_t(mesh.triangles.size()), 3}, o3c::UInt32));
+  const o3c::Tensor d =
+      scene.ComputeDistance(o3c::Tensor(q, {int64_t(points.size()), 3}, o3c::Float32));
+  const float* dp = d.GetDataPtr<float>();
+  for (std::size_t i = 0; i < points.size(); ++i) distances[i] = dp[i];
   return distances;
 }
 

@@ -67,6 +67,11 @@ std::vector<Eigen::Vector3d> SampleSurface(const Mesh& mesh, int count, uint64_t
 std::vector<double> NearestDistances(const std::vector<Eigen::Vector3d>& from,
                                      const std::vector<Eigen::Vector3d>& to);
 
+// For each point, its distance (m) to the nearest point of `mesh`'s triangles (Open3D's ray
+// casting scene; infinity if the mesh is empty). Exact where NearestDistances to samples of a
+// surface is off by their spacing.
+std::vector<double> SurfaceDistances(const std::vector<Eigen::Vector3d>& points, const Mesh& mesh);
+
 // The mean of the points (zero for none).
 Eigen::Vector3d Centroid(const std::vector<Eigen::Vector3d>& points);
 

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <random>
 
 namespace twinforge::real2sim {
@@ -71,6 +72,20 @@ TEST(Mesh, FitUprightCylinderIgnoresTheHandle) {
   EXPECT_NEAR(half.x(), radius, 0.001);
   EXPECT_NEAR(half.y(), radius, 0.001);
   EXPECT_NEAR(fit.hi.z(), height, 0.003);
+}
+
+TEST(Mesh, SurfaceDistancesAreToTheTrianglesNotToTheirCorners) {
+  // One square, two triangles, 10 cm a side in the z = 0 plane.
+  Mesh square;
+  square.vertices = {{0, 0, 0}, {0.1, 0, 0}, {0.1, 0.1, 0}, {0, 0.1, 0}};
+  square.triangles = {{0, 1, 2}, {0, 2, 3}};
+  const auto d =
+      SurfaceDistances({{0.05, 0.05, 0.003}, {0.03, 0.07, -0.01}, {0.13, 0.05, 0.04}}, square);
+  ASSERT_EQ(d.size(), 3u);
+  EXPECT_NEAR(d[0], 0.003, 1e-6);  // above the middle, far from every corner
+  EXPECT_NEAR(d[1], 0.01, 1e-6);   // below
+  EXPECT_NEAR(d[2], 0.05, 1e-6);   // off the edge: to the edge (3 cm, 4 cm)
+  EXPECT_TRUE(std::isinf(SurfaceDistances({{0, 0, 0}}, Mesh{})[0]));
 }
 
 }  // namespace
