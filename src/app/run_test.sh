@@ -42,6 +42,7 @@ grep -q "resum" "$d/second.log" || { echo "rl did not resume its checkpoint" >&2
 grep -q "distill: co-training with [1-9][0-9]* real steps" "$d/second.log"
 for f in eval/report.html eval/student.json eval/bc_real.json eval/student.jsonl \
   policies/student.pt policies/teacher.pt eval/twin_view.png calibrated/calibration/frame_00.png \
+  calibrated/calibration/mesh.json \
   identified/sysid/sysid.json; do
   [ -s "$d/run/$f" ] || { echo "missing $f" >&2; exit 1; }
 done

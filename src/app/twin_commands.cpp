@@ -1,10 +1,15 @@
 #include "app/twin_commands.h"
 
+#include <spdlog/spdlog.h>
+
+#include <fstream>
 #include <iostream>
 #include <memory>
+#include <nlohmann/json.hpp>
 
 #include "app/gui_server.h"
 #include "core/log.h"
+#include "core/scan.h"
 #include "pipeline/twin_score.h"
 #include "real2sim/build.h"
 #include "real2sim/calibrate/calibrate.h"
@@ -20,10 +25,21 @@ struct BuildCli {
 };
 
 struct CalibrateCli {
-  std::string twin, frames, out, config, solver;
+  std::string twin, frames, out, config, solver, scan;
   int steps = 0;
   real2sim::CalibrateOptions options;
 };
+
+// The scan a twin was built from, as its build.json names it, if that is still a scan directory;
+// empty otherwise.
+std::filesystem::path BuiltFrom(const std::filesystem::path& twin) {
+  std::ifstream file(twin / "build.json");
+  if (!file) return {};
+  const auto build = nlohmann::json::parse(file, nullptr, false);
+  if (build.is_discarded() || !build.contains("scan") || !build["scan"].is_string()) return {};
+  const std::filesystem::path scan = build["scan"].get<std::string>();
+  return std::filesystem::exists(scan / "frames.json") ? scan : std::filesystem::path();
+}
 
 struct GuiCli {
   GuiOptions options;
@@ -121,6 +137,11 @@ void AddTwinCommands(CLI::App& parent, int& exit_code) {
       ->required()
       ->check(CLI::ExistingDirectory);
   calibrate->add_option("--out", calibrate_cli->out, "refined twin directory to write")->required();
+  calibrate
+      ->add_option("--scan", calibrate_cli->scan,
+                   "the scan the twin was built from, to refine its meshes against (default: the "
+                   "one its build.json names, if it is still there)")
+      ->check(CLI::ExistingDirectory);
   calibrate->add_option("--config", calibrate_cli->config, "calibration options (JSON/YAML)")
       ->check(CLI::ExistingFile);
   calibrate
@@ -143,7 +164,19 @@ void AddTwinCommands(CLI::App& parent, int& exit_code) {
     const auto result = real2sim::CalibrateCamera(twin_task, frames, o.options, &progress);
     progress.Finish();
     real2sim::WriteCalibratedTwin(o.twin, frames, result, o.options, o.out);
-    std::cout << real2sim::ToJson(result).dump(2) << "\n";
+    nlohmann::json report = real2sim::ToJson(result);
+    const std::filesystem::path scan =
+        o.scan.empty() ? BuiltFrom(o.twin) : std::filesystem::path(o.scan);
+    if (o.options.mesh.iterations > 0 && !scan.empty()) {
+      core::Progress mesh_progress("refine meshes", o.options.mesh.iterations, "steps");
+      report["mesh"] =
+          real2sim::RefineTwinMeshes(o.out, core::ReadScan(scan), o.options.mesh, &mesh_progress)
+              .ToJson();
+      mesh_progress.Finish();
+    } else if (o.options.mesh.iterations > 0) {
+      spdlog::warn("calibrate: no scan to refine the meshes against (--scan); meshes kept");
+    }
+    std::cout << report.dump(2) << "\n";
     exit_code = 0;
   });
 }

@@ -105,9 +105,16 @@ class Job {
                 .AddFile(run_ / "twin/task.yaml")
                 .AddFile(run_ / "twin/scene.xml")
                 .AddFile(run_ / "camera/frames.json")
+                .AddFile(run_ / "scan/frames.json")
                 .Add(core::ToJson(o_.calibrate).dump())
                 .Hex(),
-            {"calibrated/task.yaml", "calibrated/calibration/calibration.json"}, [&] {
+            o_.calibrate.mesh.iterations > 0
+                ? std::vector<std::string>{"calibrated/task.yaml",
+                                           "calibrated/calibration/calibration.json",
+                                           "calibrated/calibration/mesh.json"}
+                : std::vector<std::string>{"calibrated/task.yaml",
+                                           "calibrated/calibration/calibration.json"},
+            [&] {
               const core::Scan frames = core::ReadScan(run_ / "camera");
               core::Progress progress("calibrate", o_.calibrate.ProgressSteps(), "steps");
               const auto c =
@@ -117,6 +124,14 @@ class Job {
               std::filesystem::remove_all(run_ / "calibrated");
               real2sim::WriteCalibratedTwin(run_ / "twin", frames, c, o_.calibrate,
                                             run_ / "calibrated");
+              // The scanned meshes against the scan's own frames, each frame's pose corrected.
+              if (o_.calibrate.mesh.iterations > 0) {
+                core::Progress mesh_progress("refine meshes", o_.calibrate.mesh.iterations,
+                                             "steps");
+                real2sim::RefineTwinMeshes(run_ / "calibrated", core::ReadScan(run_ / "scan"),
+                                           o_.calibrate.mesh, &mesh_progress);
+                mesh_progress.Finish();
+              }
             });
       // Real frames become clouds with the calibrated camera, in the demos and the evaluations.
       task_.camera = sim::LoadTaskSpec((twin / "task.yaml").string()).camera;

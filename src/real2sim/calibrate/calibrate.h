@@ -25,9 +25,65 @@
 #include "core/progress.h"
 #include "core/scan.h"
 #include "core/se3.h"
+#include "real2sim/mesh.h"
 #include "sim/task.h"
 
 namespace twinforge::real2sim {
+
+// How `calibrate` refines the scanned meshes (mesh_refine.h).
+struct MeshRefineOptions {
+  int iterations = 150;     // Adam steps; each renders `frames_per_step` frames
+  int frames_per_step = 6;  // frames are taken in turn, the same order every run
+  int width = 128;          // px: frames are reduced to this width (block medians)
+  // px, the renders' soft edge. Softer edges bias the depth: a sphere's 6 mm bump came back to
+  // 0.6 mm at 0.3 px, to 0.13 mm at 0.05 px (mesh_refine_test).
+  double sigma = 0.05;
+  double learning_rate = 0.2;  // mm of offset per step (Adam)
+  double color_learning_rate = 0.01;
+  double huber = 2;       // mm, the depth error's Huber width
+  double outlier = 10;    // mm: pixels off by more do not count
+  double rgb_weight = 1;  // x the mean L1 colour error, against the mean Huber depth error (mm)
+  // x the mean squared difference (mm^2) of the offsets of the two ends of each mesh edge: a
+  // mesh moves as a surface, not vertex by vertex.
+  double smoothness = 4;
+  double prior = 0.01;    // x the mean squared offset (mm^2): unseen vertices stay put
+  double max_offset = 8;  // mm, in either direction along the normal
+  // Each frame's camera pose is corrected too (the hand camera's reported poses are a few mm
+  // off, each differently): from every pixel that agrees, the table's and the arm's included.
+  bool frame_poses = true;
+  double pose_learning_rate = 0.15;  // mrad and mm per step
+  double pose_prior = 0.01;          // x the mean squared correction (mrad^2, mm^2)
+  template <class A>
+  void Serialize(A& a) {
+    a("iterations", iterations);
+    a("frames_per_step", frames_per_step);
+    a("width", width);
+    a("sigma", sigma);
+    a("learning_rate", learning_rate);
+    a("color_learning_rate", color_learning_rate);
+    a("huber", huber);
+    a("outlier", outlier);
+    a("rgb_weight", rgb_weight);
+    a("smoothness", smoothness);
+    a("prior", prior);
+    a("max_offset", max_offset);
+    a("frame_poses", frame_poses);
+    a("pose_learning_rate", pose_learning_rate);
+    a("pose_prior", pose_prior);
+    a.Require(iterations >= 0, "iterations", "zero (no refinement) or more steps");
+    a.Require(frames_per_step >= 1, "frames_per_step", "at least one frame");
+    a.Require(width >= 16, "width", "at least 16 px");
+    a.Require(sigma > 0, "sigma", "a positive width in px");
+    a.Require(learning_rate > 0 && color_learning_rate >= 0, "learning_rate",
+              "a positive step (mm)");
+    a.Require(huber > 0 && outlier > huber, "outlier", "a distance (mm) above the Huber width");
+    a.Require(rgb_weight >= 0 && smoothness >= 0 && prior >= 0, "smoothness",
+              "non-negative weights");
+    a.Require(max_offset > 0, "max_offset", "a positive distance in mm");
+    a.Require(pose_learning_rate > 0 && pose_prior >= 0, "pose_learning_rate",
+              "a positive step and a non-negative prior");
+  }
+};
 
 struct CalibrateOptions {
   // "gauss_newton": Levenberg-Marquardt on the depth residuals (Jacobians by differences of
@@ -56,6 +112,7 @@ struct CalibrateOptions {
   // mm at 3000.
   int mesh_triangles = 3000;
   uint64_t seed = 1;
+  MeshRefineOptions mesh;  // the scanned meshes against the scan's frames (iterations 0: off)
   // The step budget of the chosen solver.
   int& Steps() { return solver == "adam" ? iterations : gauss_newton_iterations; }
   int Steps() const { return solver == "adam" ? iterations : gauss_newton_iterations; }
@@ -82,6 +139,7 @@ struct CalibrateOptions {
     a("outlier", outlier);
     a("mesh_triangles", mesh_triangles);
     a("seed", seed);
+    a("mesh", mesh);
     a.Require(solver == "gauss_newton" || solver == "adam", "solver",
               "\"gauss_newton\" or \"adam\"");
     a.Require(gauss_newton_iterations >= 1 && iterations >= 1, "iterations", "at least one step");
@@ -134,5 +192,29 @@ std::vector<FrameFit> FitFrames(const sim::TaskSpec& twin_task, const core::Scan
 void WriteCalibratedTwin(const std::filesystem::path& twin_dir, const core::Scan& frames,
                          const CameraCalibration& calibration, const CalibrateOptions& options,
                          const std::filesystem::path& out);
+
+struct MeshRefinement {
+  std::vector<Mesh> meshes;  // the refined meshes, in the order given, with vertex colours
+  std::vector<double> loss;  // per step
+  // Over every view, pixels showing the refined meshes within the outlier distance:
+  double depth_error_before = 0, depth_error_after = 0;  // mm, mean absolute
+  double rgb_error_before = 0, rgb_error_after = 0;      // mean absolute, 0..1
+  double inliers_before = 0, inliers_after = 0;          // share of those pixels within outlier
+  double offset_rms = 0, offset_max = 0;                 // mm
+  std::vector<core::Pose> frame_corrections;  // per view: true pose = reported * correction
+  double seconds = 0;
+  nlohmann::json ToJson() const;
+};
+
+// Refines the scanned meshes of the twin in `twin_dir` (the files its twin.yaml parts name)
+// against the frames of `scan` (the scan the twin was built from: its wrist-camera poses are the
+// robot's own), each frame reduced to `options.width` and shown with the arm at its joints and
+// the table. Rewrites the mesh files, re-exports scene.xml (the visual meshes and the scan-fitted
+// collision boxes follow the new surfaces) and writes twin_dir/calibration/mesh.json with
+// mesh_NN.png per frame (real | twin before | after | depth error before | after). Throws
+// ConfigError when the twin has no scanned mesh or no frame shows one.
+MeshRefinement RefineTwinMeshes(const std::filesystem::path& twin_dir, const core::Scan& scan,
+                                const MeshRefineOptions& options,
+                                core::Progress* progress = nullptr);
 
 }  // namespace twinforge::real2sim

@@ -62,7 +62,7 @@ void TwinGeometry::RayCast(const std::array<double, 7>& q, double gripper_width,
 }
 
 RasterMesh TwinGeometry::Posed(const std::array<double, 7>& q, double gripper_width,
-                               const GeomColor& color) {
+                               const GeomColor& color, const std::function<bool(int geom)>& keep) {
   const mjModel* m = env_.model();
   const mjData* d = env_.data();
   PoseArm(q, gripper_width);
@@ -71,6 +71,7 @@ RasterMesh TwinGeometry::Posed(const std::array<double, 7>& q, double gripper_wi
   std::vector<int64_t> f;
   for (const Piece& piece : pieces_) {
     const int g = piece.geom;
+    if (keep && !keep(g)) continue;
     const Eigen::Vector3d rgb = color ? color(g) : piece.color;
     const Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> r(d->geom_xmat + 9 * g);
     const Eigen::Map<const Eigen::Vector3d> p(d->geom_xpos + 3 * g);

@@ -29,9 +29,10 @@ class TwinGeometry {
   using GeomColor = std::function<Eigen::Vector3d(int geom)>;
 
   // The twin with the arm at `q`, the fingers `gripper_width` apart and the scene at its
-  // nominal state, in the robot base frame.
+  // nominal state, in the robot base frame; with `keep`, only the geoms it accepts.
   RasterMesh Posed(const std::array<double, 7>& q, double gripper_width,
-                   const GeomColor& color = nullptr);
+                   const GeomColor& color = nullptr,
+                   const std::function<bool(int geom)>& keep = nullptr);
 
   // The twin ray-cast from `camera` (robot included, arm at `q`): depth (m along the optical
   // axis, 0 = no return) and the geom each pixel sees (-1 = none), width x height of its

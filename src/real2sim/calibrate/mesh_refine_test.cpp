@@ -1,0 +1,217 @@
+#include "real2sim/calibrate/mesh_refine.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "core/error.h"
+
+namespace twinforge::real2sim {
+namespace {
+
+const Eigen::Vector3d kCentre(0.5, 0.0, 0.1);
+constexpr double kRadius = 0.05;
+
+// A latitude-longitude sphere about kCentre whose radius in direction d is radius(d), coloured
+// by colour(d).
+template <class Radius, class Colour>
+Mesh Sphere(Radius radius, Colour colour, int rings = 20, int segments = 40) {
+  Mesh mesh;
+  auto add = [&](const Eigen::Vector3d& d) {
+    mesh.vertices.push_back(kCentre + radius(d) * d);
+    mesh.colors.push_back(colour(d));
+    return static_cast<int>(mesh.vertices.size()) - 1;
+  };
+  const int top = add(Eigen::Vector3d::UnitZ());
+  for (int i = 1; i < rings; ++i) {
+    const double theta = M_PI * i / rings;
+    for (int j = 0; j < segments; ++j) {
+      const double phi = 2 * M_PI * j / segments;
+      add({std::sin(theta) * std::cos(phi), std::sin(theta) * std::sin(phi), std::cos(theta)});
+    }
+  }
+  const int bottom = add(-Eigen::Vector3d::UnitZ());
+  auto at = [&](int ring, int j) { return 1 + (ring - 1) * segments + (j % segments); };
+  for (int j = 0; j < segments; ++j) {
+    mesh.triangles.emplace_back(top, at(1, j), at(1, j + 1));
+    for (int i = 1; i + 1 < rings; ++i) {
+      mesh.triangles.emplace_back(at(i, j), at(i + 1, j), at(i + 1, j + 1));
+      mesh.triangles.emplace_back(at(i, j), at(i + 1, j + 1), at(i, j + 1));
+    }
+    mesh.triangles.emplace_back(at(rings - 1, j), bottom, at(rings - 1, j + 1));
+  }
+  return mesh;
+}
+
+Eigen::Vector3d TrueColour(const Eigen::Vector3d& d) {
+  return {0.5 + 0.3 * d.x(), 0.4 + 0.2 * d.y(), 0.6 - 0.3 * d.z()};
+}
+
+// A camera at `eye` looking at the sphere's centre (OpenCV axes: z forward, y down).
+core::Pose LookAt(const Eigen::Vector3d& eye) {
+  const Eigen::Vector3d z = (kCentre - eye).normalized();
+  const Eigen::Vector3d x = z.cross(Eigen::Vector3d::UnitZ()).normalized();
+  const Eigen::Vector3d y = z.cross(x);
+  Eigen::Matrix3d r;
+  r << x, y, z;
+  return {eye, core::Quat(r)};
+}
+
+// What a camera at `eye` sees of `truth` standing on a table (the table is fixed: it is not
+// refined, but hides and is seen).
+RefineView View(const Mesh& truth, const Eigen::Vector3d& eye) {
+  torch::NoGradGuard no_grad;
+  RefineView view;
+  view.intrinsics = {128, 96, 110, 110, 63.5, 47.5};
+  view.camera_to_base = LookAt(eye);
+  view.fixed = BoxMesh({0.5, 0, 0.04}, {0.6, 0.6, 0.02}, {0.7, 0.7, 0.6});
+  std::vector<double> v, c;
+  for (size_t i = 0; i < truth.vertices.size(); ++i)
+    for (int k = 0; k < 3; ++k) {
+      v.push_back(truth.vertices[i][k]);
+      c.push_back(truth.colors[i][k]);
+    }
+  std::vector<int64_t> f;
+  for (const auto& t : truth.triangles) f.insert(f.end(), {t[0], t[1], t[2]});
+  const auto dbl = torch::TensorOptions().dtype(torch::kFloat64);
+  const int64_t n = static_cast<int64_t>(truth.vertices.size());
+  RasterMesh mesh{torch::from_blob(v.data(), {n, 3}, dbl).clone(),
+                  torch::from_blob(f.data(), {static_cast<int64_t>(f.size() / 3), 3},
+                                   torch::TensorOptions().dtype(torch::kInt64))
+                      .clone(),
+                  torch::from_blob(c.data(), {n, 3}, dbl).clone()};
+  SoftRasterOptions sharp;
+  sharp.sigma = 0.05;
+  const SoftImage image = SoftRasterize(JoinMeshes({mesh, view.fixed}), view.intrinsics,
+                                        ToTensor(view.camera_to_base), sharp);
+  view.depth = image.depth * (image.silhouette > 0.5).to(torch::kFloat64);
+  view.rgb = image.rgb;
+  return view;
+}
+
+TEST(MeshRefine, ABumpInTheScanIsPressedBackAndItsColoursCorrected) {
+  const Mesh truth = Sphere([](const Eigen::Vector3d&) { return kRadius; }, TrueColour);
+  // The scan: a 6 mm bump facing the cameras, and colours washed out by 0.15.
+  const Eigen::Vector3d bump_at = Eigen::Vector3d(-1, 0.3, 0.4).normalized();
+  auto bumped = [&](const Eigen::Vector3d& d) {
+    const double angle = std::acos(std::clamp(d.dot(bump_at), -1.0, 1.0));
+    return kRadius + 0.006 * std::exp(-angle * angle / (2 * 0.4 * 0.4));
+  };
+  const Mesh scan = Sphere(bumped, [](const Eigen::Vector3d& d) {
+    return (TrueColour(d) + Eigen::Vector3d::Constant(0.15)).cwiseMin(1.0).eval();
+  });
+  // Each view's reported pose is off by up to 2.4 mm and 4 mrad about its centre, as a hand
+  // camera's are, by errors that average to zero over the views (base frame).
+  std::vector<RefineView> views;
+  std::vector<core::Pose> truths;
+  const double size[] = {1, -1, 0.5, -0.5, 0.8, -0.8};
+  int n = 0;
+  for (const auto& eye : {Eigen::Vector3d(0.15, 0.1, 0.35), Eigen::Vector3d(0.2, -0.2, 0.3),
+                          Eigen::Vector3d(0.2, 0.25, 0.25), Eigen::Vector3d(0.3, 0.0, 0.5),
+                          Eigen::Vector3d(0.5, 0.35, 0.3), Eigen::Vector3d(0.5, -0.35, 0.3)}) {
+    views.push_back(View(truth, eye));
+    truths.push_back(views.back().camera_to_base);
+    const double s = size[n++];
+    core::Pose& pose = views.back().camera_to_base;
+    pose.translation += s * Eigen::Vector3d(0.0015, -0.001, 0.0015);
+    pose.rotation =
+        core::Quat(Eigen::AngleAxisd(0.004 * s, Eigen::Vector3d(1, -0.5, 0.5).normalized())) *
+        pose.rotation;
+  }
+  // How far the views' poses are from the truth: mm at the sphere (0.4 m away).
+  auto pose_error = [&](const std::vector<core::Pose>& poses) {
+    double e = 0;
+    for (size_t i = 0; i < poses.size(); ++i) {
+      const core::Pose d = truths[i].Inverse() * poses[i];
+      e += 1000 * (d.translation.norm() + 0.4 * Eigen::AngleAxisd(d.rotation).angle());
+    }
+    return e / poses.size();
+  };
+
+  // Radial error of each vertex on the half the cameras see (x < centre), mm; colour error.
+  auto errors = [&](const Mesh& m) {
+    double radial = 0, colour = 0;
+    int n = 0;
+    for (size_t i = 0; i < m.vertices.size(); ++i) {
+      const Eigen::Vector3d d = m.vertices[i] - kCentre;
+      if (d.x() > -0.01 || d.z() < -0.02) continue;
+      radial += 1000 * std::abs(d.norm() - kRadius);
+      colour += (m.colors[i] - TrueColour(d.normalized())).cwiseAbs().mean();
+      ++n;
+    }
+    return std::make_pair(radial / n, colour / n);
+  };
+  MeshRefineOptions options;
+  const MeshRefinement refined = RefineMeshes({scan}, views, options);
+  ASSERT_EQ(refined.meshes.size(), 1u);
+  const auto [radial_before, colour_before] = errors(scan);
+  const auto [radial_after, colour_after] = errors(refined.meshes[0]);
+  std::printf("radial error %.2f -> %.2f mm, colour %.3f -> %.3f; depth %.2f -> %.2f mm\n",
+              radial_before, radial_after, colour_before, colour_after, refined.depth_error_before,
+              refined.depth_error_after);
+  EXPECT_GT(radial_before, 1.2);
+  EXPECT_LT(radial_after, 0.25 * radial_before);
+  EXPECT_LT(colour_after, 0.1 * colour_before);
+  EXPECT_LT(refined.depth_error_after, 0.5 * refined.depth_error_before);
+  EXPECT_LE(refined.offset_max, options.max_offset + 1e-9);
+  std::vector<core::Pose> reported, corrected;
+  for (size_t i = 0; i < views.size(); ++i) {
+    reported.push_back(views[i].camera_to_base);
+    corrected.push_back(views[i].camera_to_base * refined.frame_corrections[i]);
+  }
+  std::printf("view pose error %.2f -> %.2f mm\n", pose_error(reported), pose_error(corrected));
+  EXPECT_LT(pose_error(corrected), 0.4 * pose_error(reported));
+}
+
+TEST(MeshRefine, IsDeterministic) {
+  const Mesh truth = Sphere([](const Eigen::Vector3d&) { return kRadius; }, TrueColour);
+  const Mesh scan =
+      Sphere([](const Eigen::Vector3d& d) { return kRadius + 0.003 * d.x(); }, TrueColour);
+  const std::vector<RefineView> views = {View(truth, {0.15, 0.1, 0.35}),
+                                         View(truth, {0.2, -0.2, 0.3})};
+  MeshRefineOptions options;
+  options.iterations = 8;
+  const MeshRefinement a = RefineMeshes({scan}, views, options);
+  const MeshRefinement b = RefineMeshes({scan}, views, options);
+  EXPECT_EQ(a.meshes[0].vertices, b.meshes[0].vertices);
+  EXPECT_EQ(a.meshes[0].colors, b.meshes[0].colors);
+  EXPECT_EQ(a.loss, b.loss);
+  EXPECT_NE(a.meshes[0].vertices, scan.vertices);
+}
+
+TEST(MeshRefine, AFrameIsReducedToBlockMediansWithItsIntrinsics) {
+  const core::PinholeIntrinsics k{4, 4, 10, 10, 1.5, 1.5};
+  std::vector<float> depth = {1, 2, 0, 0,  //
+                              3, 4, 6, 5,  //
+                              0, 0, 7, 7,  //
+                              0, 9, 7, 8};
+  std::vector<uint8_t> rgb(48, 51);
+  const RefineView view = ReduceFrame(k, core::Pose(), depth, rgb, 2);
+  EXPECT_EQ(view.intrinsics.width, 2);
+  EXPECT_DOUBLE_EQ(view.intrinsics.fx, 5);
+  EXPECT_DOUBLE_EQ(view.intrinsics.cx, 0.5);  // the middle, as 1.5 was of 4 pixels
+  const auto d = view.depth.accessor<double, 2>();
+  EXPECT_EQ(d[0][0], 3);  // the upper median of 1, 2, 3, 4
+  EXPECT_EQ(d[0][1], 6);  // the upper median of 5, 6: half the block returned
+  EXPECT_EQ(d[1][0], 0);  // fewer than half did
+  EXPECT_EQ(d[1][1], 7);
+  EXPECT_NEAR(view.rgb[0][0][0].item<double>(), 0.2, 1e-12);
+  EXPECT_THROW(ReduceFrame(k, core::Pose(), std::vector<float>(3), rgb, 2), core::Error);
+}
+
+TEST(MeshRefine, NoViewOfTheMeshesIsAClearError) {
+  const Mesh truth = Sphere([](const Eigen::Vector3d&) { return kRadius; }, TrueColour);
+  RefineView away = View(truth, {0.2, 0.1, 0.3});
+  away.camera_to_base = LookAt({0.2, 0.1, 0.3});
+  away.camera_to_base.rotation =
+      away.camera_to_base.rotation * core::Quat(Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()));
+  try {
+    RefineMeshes({truth}, {away}, MeshRefineOptions{});
+    FAIL() << "no error";
+  } catch (const core::ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("frames"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace twinforge::real2sim
