@@ -576,28 +576,9 @@ void WriteCalibratedTwin(const std::filesystem::path& twin_dir, const core::Scan
                         options.mesh_triangles);
   for (size_t i = 0; i < scan.frames.size(); ++i) {
     const RealFrame f = ReadFrame(scan, i, geometry);
-    torch::NoGradGuard no_grad;
-    const int w = f.intrinsics.width, h = f.intrinsics.height;
-    core::Image image{5 * w, h, 3, 8, std::vector<uint8_t>(5 * w * h * 3)};
-    auto put = [&](int panel, const torch::Tensor& rgb) {
-      const auto a = rgb.contiguous().clamp(0, 1);
-      const auto acc = a.accessor<double, 3>();
-      for (int r = 0; r < h; ++r)
-        for (int c = 0; c < w; ++c)
-          for (int k = 0; k < 3; ++k)
-            image.bytes[(r * 5 * w + panel * w + c) * 3 + k] =
-                static_cast<uint8_t>(acc[r][c][k] * 255 + 0.5);
-    };
-    put(0, f.rgb);
-    int panel = 1;
-    std::vector<torch::Tensor> errors;
-    for (const core::Pose& pose : {f.reported, f.reported * calibration.correction}) {
-      const SoftImage s = SharpImage(f, pose);
-      put(panel++, s.rgb * s.silhouette.unsqueeze(2));
-      const auto both = ((f.depth > 0) & (s.silhouette > 0.5)).to(torch::kFloat64);
-      errors.push_back(((s.depth - f.depth).abs() / options.outlier).clamp(0, 1) * both);
-    }
-    for (const auto& e : errors) put(panel++, e.unsqueeze(2).expand({h, w, 3}));
+    const core::Image image =
+        BeforeAfterPicture(f.rgb, f.depth, SharpImage(f, f.reported),
+                           SharpImage(f, f.reported * calibration.correction), options.outlier);
     char name[48];
     std::snprintf(name, sizeof(name), "frame_%02zu.png", i);
     core::WritePng(report / name, image);

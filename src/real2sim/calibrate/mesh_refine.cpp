@@ -244,7 +244,7 @@ MeshRefinement RefineMeshes(const std::vector<Mesh>& meshes, const std::vector<R
   auto free = torch::zeros({static_cast<int64_t>(views.size()), 6}, kDouble);
   if (o.frame_poses) free.requires_grad_(true);
   auto centred = [&] { return free - free.mean(0, true); };
-  auto reported = [&](const torch::Tensor& c) {
+  auto corrected = [&](const torch::Tensor& c) {
     std::vector<core::Pose> poses;
     for (size_t i = 0; i < views.size(); ++i)
       poses.push_back(ToPose(Corrected(views[i].camera_to_base, c[i].detach() * 1e-3)));
@@ -253,27 +253,24 @@ MeshRefinement RefineMeshes(const std::vector<Mesh>& meshes, const std::vector<R
 
   MeshRefinement result;
   const Agreement before =
-      Agree(p, p.vertices, p.colors, views, reported(free.detach()), owned, o, raster);
-  torch::optim::Adam adam({offsets, colors}, torch::optim::AdamOptions(o.learning_rate));
-  // Offsets and colours step at their own rates: one group each.
-  adam.param_groups().clear();
-  adam.add_param_group(torch::optim::OptimizerParamGroup(
-      {offsets}, std::make_unique<torch::optim::AdamOptions>(o.learning_rate)));
-  adam.add_param_group(torch::optim::OptimizerParamGroup(
-      {colors}, std::make_unique<torch::optim::AdamOptions>(o.color_learning_rate)));
-  adam.add_param_group(torch::optim::OptimizerParamGroup(
-      {free}, std::make_unique<torch::optim::AdamOptions>(o.pose_learning_rate)));
+      Agree(p, p.vertices, p.colors, views, corrected(free.detach()), owned, o, raster);
+  // Offsets, colours and frame poses step at their own rates: one group each.
+  std::vector<torch::optim::OptimizerParamGroup> groups;
+  for (const auto& [tensor, rate] :
+       {std::pair{offsets, o.learning_rate}, std::pair{colors, o.color_learning_rate},
+        std::pair{free, o.pose_learning_rate}})
+    groups.emplace_back(std::vector<torch::Tensor>{tensor},
+                        std::make_unique<torch::optim::AdamOptions>(rate));
+  torch::optim::Adam adam(groups, torch::optim::AdamOptions(o.learning_rate));
+  const double rates[] = {o.learning_rate, o.color_learning_rate, o.pose_learning_rate};
 
   const int batch = std::min<int>(o.frames_per_step, static_cast<int>(seen.size()));
   for (int step = 0; step < o.iterations; ++step) {
     // Cosine decay to a tenth: large moves first, then settle.
     const double decay = 0.1 + 0.45 * (1 + std::cos(M_PI * step / std::max(1, o.iterations)));
-    static_cast<torch::optim::AdamOptions&>(adam.param_groups()[0].options())
-        .lr(o.learning_rate * decay);
-    static_cast<torch::optim::AdamOptions&>(adam.param_groups()[1].options())
-        .lr(o.color_learning_rate * decay);
-    static_cast<torch::optim::AdamOptions&>(adam.param_groups()[2].options())
-        .lr(o.pose_learning_rate * decay);
+    for (int g = 0; g < 3; ++g)
+      static_cast<torch::optim::AdamOptions&>(adam.param_groups()[g].options())
+          .lr(rates[g] * decay);
     adam.zero_grad();
     const RasterMesh refined{place(offsets), p.faces, colors};
     const auto corrections = centred();
@@ -298,11 +295,10 @@ MeshRefinement RefineMeshes(const std::vector<Mesh>& meshes, const std::vector<R
       if (o.rgb_weight > 0)
         data = data + o.rgb_weight * (image.rgb - view.rgb).abs().mean(2).masked_select(in).mean();
     }
-    const auto ends = p.edges;
     auto loss = data / batch;
-    if (ends.size(0) > 0)
-      loss = loss + o.smoothness * (offsets.index_select(0, ends.select(1, 0)) -
-                                    offsets.index_select(0, ends.select(1, 1)))
+    if (p.edges.size(0) > 0)
+      loss = loss + o.smoothness * (offsets.index_select(0, p.edges.select(1, 0)) -
+                                    offsets.index_select(0, p.edges.select(1, 1)))
                                        .square()
                                        .mean();
     loss = loss + o.prior * offsets.square().mean();
@@ -320,7 +316,7 @@ MeshRefinement RefineMeshes(const std::vector<Mesh>& meshes, const std::vector<R
 
   torch::NoGradGuard no_grad;
   const auto vertices = place(offsets);
-  const std::vector<core::Pose> poses = reported(centred());
+  const std::vector<core::Pose> poses = corrected(centred());
   const Agreement after = Agree(p, vertices, colors, views, poses, owned, o, raster);
   for (size_t i = 0; i < views.size(); ++i)
     result.frame_corrections.push_back(views[i].camera_to_base.Inverse() * poses[i]);
@@ -407,30 +403,13 @@ MeshRefinement RefineTwinMeshes(const std::filesystem::path& twin_dir, const cor
   const Packed before = Pack(meshes), after = Pack(result.meshes);
   for (size_t i = 0; i < views.size(); ++i) {
     const RefineView& v = views[i];
-    const int w = v.intrinsics.width, h = v.intrinsics.height;
-    core::Image image{5 * w, h, 3, 8, std::vector<uint8_t>(5 * static_cast<size_t>(w) * h * 3)};
-    auto put = [&](int panel, const torch::Tensor& rgb) {
-      const auto a = rgb.contiguous().clamp(0, 1);
-      const auto acc = a.accessor<double, 3>();
-      for (int r = 0; r < h; ++r)
-        for (int c = 0; c < w; ++c)
-          for (int k = 0; k < 3; ++k)
-            image.bytes[(static_cast<size_t>(r) * 5 * w + panel * w + c) * 3 + k] =
-                static_cast<uint8_t>(acc[r][c][k] * 255 + 0.5);
+    auto render = [&](const Packed& p, const core::Pose& pose) {
+      return SoftRasterize(Scene({p.vertices, p.faces, p.colors}, v), v.intrinsics, ToTensor(pose),
+                           sharp);
     };
-    put(0, v.rgb);
-    int panel = 1;
-    std::vector<torch::Tensor> errors;
-    for (const Packed* p : {&before, &after}) {
-      const core::Pose pose =
-          p == &before ? v.camera_to_base : v.camera_to_base * result.frame_corrections[i];
-      const SoftImage s = SoftRasterize(Scene({p->vertices, p->faces, p->colors}, v), v.intrinsics,
-                                        ToTensor(pose), sharp);
-      put(panel++, s.rgb * s.silhouette.unsqueeze(2));
-      const auto both = ((v.depth > 0) & (s.silhouette > 0.5)).to(torch::kFloat64);
-      errors.push_back(((s.depth - v.depth).abs() * 1000 / options.outlier).clamp(0, 1) * both);
-    }
-    for (const auto& e : errors) put(panel++, e.unsqueeze(2).expand({h, w, 3}));
+    const core::Image image = BeforeAfterPicture(
+        v.rgb, v.depth, render(before, v.camera_to_base),
+        render(after, v.camera_to_base * result.frame_corrections[i]), options.outlier * 1e-3);
     char name[48];
     std::snprintf(name, sizeof(name), "mesh_%02zu.png", i);
     core::WritePng(report / name, image);

@@ -239,4 +239,29 @@ SoftImage SoftRasterize(const RasterMesh& mesh, const core::PinholeIntrinsics& k
   return image;
 }
 
+core::Image BeforeAfterPicture(const torch::Tensor& rgb, const torch::Tensor& depth,
+                               const SoftImage& before, const SoftImage& after, double outlier) {
+  torch::NoGradGuard no_grad;
+  const int h = static_cast<int>(depth.size(0)), w = static_cast<int>(depth.size(1));
+  core::Image image{5 * w, h, 3, 8, std::vector<uint8_t>(5 * static_cast<size_t>(w) * h * 3)};
+  auto put = [&](int panel, const torch::Tensor& colour) {
+    const auto a = colour.contiguous().clamp(0, 1);
+    const auto acc = a.accessor<double, 3>();
+    for (int r = 0; r < h; ++r)
+      for (int c = 0; c < w; ++c)
+        for (int k = 0; k < 3; ++k)
+          image.bytes[(static_cast<size_t>(r) * 5 * w + panel * w + c) * 3 + k] =
+              static_cast<uint8_t>(acc[r][c][k] * 255 + 0.5);
+  };
+  put(0, rgb);
+  int panel = 1;
+  for (const SoftImage* s : {&before, &after}) put(panel++, s->rgb * s->silhouette.unsqueeze(2));
+  for (const SoftImage* s : {&before, &after}) {
+    const auto both = ((depth > 0) & (s->silhouette > 0.5)).to(torch::kFloat64);
+    const auto error = ((s->depth - depth).abs() / outlier).clamp(0, 1) * both;
+    put(panel++, error.unsqueeze(2).expand({h, w, 3}));
+  }
+  return image;
+}
+
 }  // namespace twinforge::real2sim

@@ -19,6 +19,7 @@
 
 #include <vector>
 
+#include "core/image.h"
 #include "core/pinhole.h"
 #include "core/se3.h"
 
@@ -66,6 +67,12 @@ torch::Tensor RotationMatrix(const torch::Tensor& rotation_vector);
 CameraTensor PerturbPose(const core::Pose& pose, const torch::Tensor& delta);
 // The same, evaluated: a pose composed with the correction `delta`.
 core::Pose ApplyDelta(const core::Pose& pose, const torch::Tensor& delta);
+// A frame against the twin rendered two ways (before and after a refinement), as one picture of
+// five panels: the real colour | the first render | the second | the depth error of each (black:
+// agree; white: `outlier` m or more off; where both have a surface). rgb [H, W, 3], depth [H, W].
+core::Image BeforeAfterPicture(const torch::Tensor& rgb, const torch::Tensor& depth,
+                               const SoftImage& before, const SoftImage& after, double outlier);
+
 // [3, 3] / [3] double tensors of a pose, and back.
 CameraTensor ToTensor(const core::Pose& pose);
 core::Pose ToPose(const CameraTensor& camera);
