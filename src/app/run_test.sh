@@ -48,6 +48,7 @@ for f in eval/report.html eval/student.json eval/bc_real.json eval/student.jsonl
 done
 grep -q "Success on reality" "$d/run/eval/report.html"
 grep -q "Physics identified on the robot" "$d/run/eval/report.html"
+grep -q "The scanned meshes" "$d/run/eval/report.html"
 # sysid measured the proxy arm's lagging servo: the identified twin's has a latency.
 if grep -q "latency: 0$" "$d/run/identified/task.yaml"; then
   echo "the identified twin's servo has no latency" >&2

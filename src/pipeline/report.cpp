@@ -148,6 +148,27 @@ std::filesystem::path WriteReport(const std::filesystem::path& root) {
            "<p>Real colour | twin from the reported pose | twin from the calibrated pose | depth "
            "error before | after (black: agree, white: 8 cm or more).</p>\n";
   }
+  const nlohmann::json mesh = ReadJson(root / "calibrated/calibration/mesh.json");
+  if (mesh.is_object()) {
+    double shift = 0;
+    for (const auto& f : mesh["frame_corrections"]) shift += f["translation_mm"].get<double>();
+    char line[512];
+    std::snprintf(
+        line, sizeof(line),
+        "<h3>The scanned meshes</h3>\n<p>Refined against the %zu scan frames, each "
+        "frame's pose corrected (%.1f mm on average): the frames' mean depth error "
+        "went from %.1f mm to %.1f mm; the vertices moved %.1f mm rms.</p>\n",
+        mesh["frame_corrections"].size(),
+        mesh["frame_corrections"].empty() ? 0.0 : shift / mesh["frame_corrections"].size(),
+        mesh["depth_error_mm"]["before"].get<double>(),
+        mesh["depth_error_mm"]["after"].get<double>(), mesh["offset_rms_mm"].get<double>());
+    h << line;
+    if (std::filesystem::exists(root / "calibrated/calibration/mesh_00.png"))
+      h << "<img style='max-width:96%;image-rendering:pixelated' "
+           "src='../calibrated/calibration/mesh_00.png' alt='mesh refinement frame'>"
+           "<p>Real colour | twin before | after | depth error before | after (black: agree, "
+           "white: 1 cm or more).</p>\n";
+  }
 
   const nlohmann::json sysid = ReadJson(root / "identified/sysid/sysid.json");
   if (sysid.is_object()) {
