@@ -100,6 +100,10 @@ class Job {
     // Where the fixed camera really is: the twin rendered against its frames.
     std::filesystem::path twin = o_.camera_frames > 0 ? run_ / "calibrated" : run_ / "twin";
     if (o_.camera_frames > 0) {
+      std::vector<std::string> calibrated_files = {"calibrated/task.yaml",
+                                                   "calibrated/calibration/calibration.json"};
+      if (o_.calibrate.mesh.iterations > 0)
+        calibrated_files.push_back("calibrated/calibration/mesh.json");
       Stage("calibrate",
             Fingerprint()
                 .AddFile(run_ / "twin/task.yaml")
@@ -108,13 +112,7 @@ class Job {
                 .AddFile(run_ / "scan/frames.json")
                 .Add(core::ToJson(o_.calibrate).dump())
                 .Hex(),
-            o_.calibrate.mesh.iterations > 0
-                ? std::vector<std::string>{"calibrated/task.yaml",
-                                           "calibrated/calibration/calibration.json",
-                                           "calibrated/calibration/mesh.json"}
-                : std::vector<std::string>{"calibrated/task.yaml",
-                                           "calibrated/calibration/calibration.json"},
-            [&] {
+            calibrated_files, [&] {
               const core::Scan frames = core::ReadScan(run_ / "camera");
               core::Progress progress("calibrate", o_.calibrate.ProgressSteps(), "steps");
               const auto c =
