@@ -120,24 +120,7 @@ TwinScore ScoreTwin(const std::filesystem::path& twin_dir, const std::filesystem
       return sim::InSubtree(m, m->geom_bodyid[g], root) && sim::GeomRgba(m, g)[3] > 0;
     };
     // The world's surface as triangles, for exact distances to it.
-    real2sim::Mesh world_mesh;
-    for (int g = 0; g < m->ngeom; ++g) {
-      if (!mine(g)) continue;
-      const sim::TriangleMesh t = sim::TessellateGeom(m, g);
-      const auto scale = t.unit ? sim::UnitShapeScale(m, g) : std::array<double, 3>{1, 1, 1};
-      const Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> r(d->geom_xmat + 9 * g);
-      const Eigen::Map<const Eigen::Vector3d> x(d->geom_xpos + 3 * g);
-      real2sim::Mesh piece;
-      for (std::size_t i = 0; i + 2 < t.vertices.size(); i += 3)
-        piece.vertices.push_back(base_inv *
-                                 Eigen::Vector3d(r * Eigen::Vector3d(t.vertices[i] * scale[0],
-                                                                     t.vertices[i + 1] * scale[1],
-                                                                     t.vertices[i + 2] * scale[2]) +
-                                                 x));
-      for (std::size_t i = 0; i + 2 < t.triangles.size(); i += 3)
-        piece.triangles.emplace_back(t.triangles[i], t.triangles[i + 1], t.triangles[i + 2]);
-      real2sim::AppendMesh(world_mesh, piece);
-    }
+    const real2sim::Mesh world_mesh = real2sim::PosedGeoms(m, d, env.base(), mine);
     const sim::SurfaceSampler sampler(m, ~0u, options.density, 16, 200000, mine);
     std::vector<float> xyz(3 * std::size_t(sampler.capacity()));
     const int n = sampler.Transform(m, d, env.base(), everywhere, xyz.data());

@@ -9,6 +9,7 @@
 #include "core/error.h"
 #include "core/fs.h"
 #include "core/rng.h"
+#include "sim/geom_scene.h"
 
 namespace twinforge::real2sim {
 
@@ -106,6 +107,11 @@ std::vector<double> NearestDistances(const std::vector<Eigen::Vector3d>& from,
   return distances;
 }
 
+bool Degenerate(const Mesh& mesh, const Eigen::Vector3i& t) {
+  const auto& v = mesh.vertices;
+  return (v[t[1]] - v[t[0]]).cross(v[t[2]] - v[t[0]]).squaredNorm() < 1e-24;
+}
+
 std::vector<double> SurfaceDistances(const std::vector<Eigen::Vector3d>& points, const Mesh& mesh) {
   std::vector<double> distances(points.size(), std::numeric_limits<double>::infinity());
   if (mesh.empty() || points.empty()) return distances;
@@ -114,16 +120,40 @@ std::vector<double> SurfaceDistances(const std::vector<Eigen::Vector3d>& points,
   std::vector<uint32_t> t;
   for (const auto& x : mesh.vertices) v.insert(v.end(), {float(x.x()), float(x.y()), float(x.z())});
   for (const auto& f : mesh.triangles)
-    t.insert(t.end(), {uint32_t(f[0]), uint32_t(f[1]), uint32_t(f[2])});
+    if (!Degenerate(mesh, f)) t.insert(t.end(), {uint32_t(f[0]), uint32_t(f[1]), uint32_t(f[2])});
   for (const auto& x : points) q.insert(q.end(), {float(x.x()), float(x.y()), float(x.z())});
   open3d::t::geometry::RaycastingScene scene;
   scene.AddTriangles(o3c::Tensor(v, {int64_t(mesh.vertices.size()), 3}, o3c::Float32),
-                     o3c::Tensor(t, {int64_t(mesh.triangles.size()), 3}, o3c::UInt32));
+                     o3c::Tensor(t, {int64_t(t.size() / 3), 3}, o3c::UInt32));
   const o3c::Tensor d =
       scene.ComputeDistance(o3c::Tensor(q, {int64_t(points.size()), 3}, o3c::Float32));
   const float* dp = d.GetDataPtr<float>();
   for (std::size_t i = 0; i < points.size(); ++i) distances[i] = dp[i];
   return distances;
+}
+
+Mesh PosedGeoms(const mjModel* m, const mjData* d, const core::Pose& frame,
+                const std::function<bool(int geom)>& keep) {
+  const core::Pose to_frame = frame.Inverse();
+  Mesh out;
+  for (int g = 0; g < m->ngeom; ++g) {
+    if (!keep(g)) continue;
+    const sim::TriangleMesh t = sim::TessellateGeom(m, g);
+    const auto scale = t.unit ? sim::UnitShapeScale(m, g) : std::array<double, 3>{1, 1, 1};
+    const Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> r(d->geom_xmat + 9 * g);
+    const Eigen::Map<const Eigen::Vector3d> x(d->geom_xpos + 3 * g);
+    Mesh piece;
+    for (std::size_t i = 0; i + 2 < t.vertices.size(); i += 3)
+      piece.vertices.push_back(to_frame *
+                               Eigen::Vector3d(r * Eigen::Vector3d(t.vertices[i] * scale[0],
+                                                                   t.vertices[i + 1] * scale[1],
+                                                                   t.vertices[i + 2] * scale[2]) +
+                                               x));
+    for (std::size_t i = 0; i + 2 < t.triangles.size(); i += 3)
+      piece.triangles.emplace_back(t.triangles[i], t.triangles[i + 1], t.triangles[i + 2]);
+    AppendMesh(out, piece);
+  }
+  return out;
 }
 
 Eigen::Vector3d Centroid(const std::vector<Eigen::Vector3d>& points) {
@@ -178,6 +208,18 @@ core::Pose AlignPoints(const std::vector<Eigen::Vector3d>& source,
       a, b, reach, Eigen::Matrix4d::Identity(),
       open3d::pipelines::registration::TransformationEstimationPointToPoint(false),
       open3d::pipelines::registration::ICPConvergenceCriteria(1e-8, 1e-8, 100));
+  return core::Pose::FromMatrix(result.transformation_);
+}
+
+core::Pose AlignToSurface(const std::vector<Eigen::Vector3d>& points, const Mesh& surface,
+                          double reach, int samples, uint64_t seed) {
+  open3d::geometry::PointCloud a, b;
+  a.points_ = points;
+  b.points_ = SampleSurface(surface, samples, seed, &b.normals_);
+  const auto result = open3d::pipelines::registration::RegistrationICP(
+      a, b, reach, Eigen::Matrix4d::Identity(),
+      open3d::pipelines::registration::TransformationEstimationPointToPlane(),
+      open3d::pipelines::registration::ICPConvergenceCriteria(1e-8, 1e-8, 50));
   return core::Pose::FromMatrix(result.transformation_);
 }
 

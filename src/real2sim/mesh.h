@@ -2,8 +2,11 @@
 // files). Meshes are written as PLY or OBJ so other tools can open them.
 #pragma once
 
+#include <mujoco/mujoco.h>
+
 #include <Eigen/Core>
 #include <filesystem>
+#include <functional>
 #include <vector>
 
 #include "core/se3.h"
@@ -67,9 +70,17 @@ std::vector<Eigen::Vector3d> SampleSurface(const Mesh& mesh, int count, uint64_t
 std::vector<double> NearestDistances(const std::vector<Eigen::Vector3d>& from,
                                      const std::vector<Eigen::Vector3d>& to);
 
+// The rigid motion that best moves `points` onto `surface`: point-to-plane ICP (Open3D) against
+// `samples` points drawn on it, from the identity, correspondences within `reach` m.
+core::Pose AlignToSurface(const std::vector<Eigen::Vector3d>& points, const Mesh& surface,
+                          double reach, int samples, uint64_t seed);
+
+// Whether triangle `t` of `mesh` has (next to) no area: Open3D's distance queries assert on one.
+bool Degenerate(const Mesh& mesh, const Eigen::Vector3i& t);
+
 // For each point, its distance (m) to the nearest point of `mesh`'s triangles (Open3D's ray
-// casting scene; infinity if the mesh is empty). Exact where NearestDistances to samples of a
-// surface is off by their spacing.
+// casting scene; infinity if the mesh is empty; triangles without area skipped). Exact where
+// NearestDistances to samples of a surface is off by their spacing.
 std::vector<double> SurfaceDistances(const std::vector<Eigen::Vector3d>& points, const Mesh& mesh);
 
 // The mean of the points (zero for none).
@@ -110,5 +121,10 @@ UprightBounds FitUprightCylinder(const std::vector<Eigen::Vector3d>& points, dou
 // that best moves `source` onto `target`.
 core::Pose AlignPoints(const std::vector<Eigen::Vector3d>& source,
                        const std::vector<Eigen::Vector3d>& target, double reach);
+
+// The geoms of a MuJoCo scene that `keep` accepts, tessellated and posed as `d` has them, in the
+// frame whose pose in the world is `frame` (the robot base, usually).
+Mesh PosedGeoms(const mjModel* m, const mjData* d, const core::Pose& frame,
+                const std::function<bool(int geom)>& keep);
 
 }  // namespace twinforge::real2sim

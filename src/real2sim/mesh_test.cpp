@@ -88,5 +88,41 @@ TEST(Mesh, SurfaceDistancesAreToTheTrianglesNotToTheirCorners) {
   EXPECT_TRUE(std::isinf(SurfaceDistances({{0, 0, 0}}, Mesh{})[0]));
 }
 
+// A triangle without area (a tessellated pole, a collapsed scan face) is skipped: Open3D's
+// distance query asserted on one.
+TEST(Mesh, SurfaceDistancesSkipTrianglesWithoutArea) {
+  Mesh square;
+  square.vertices = {{0, 0, 0}, {0.1, 0, 0}, {0.1, 0.1, 0}, {0, 0.1, 0}, {0.2, 0, 0}};
+  square.triangles = {{0, 1, 2}, {0, 2, 3}, {1, 4, 4}, {0, 1, 4}};  // the last two: no area
+  EXPECT_FALSE(Degenerate(square, square.triangles[1]));
+  EXPECT_TRUE(Degenerate(square, square.triangles[2]));
+  EXPECT_TRUE(Degenerate(square, square.triangles[3]));
+  EXPECT_NEAR(SurfaceDistances({{0.05, 0.05, 0.003}}, square)[0], 0.003, 1e-6);
+}
+
+// Points of a corner (a floor and two walls) moved by 5 mm and 2 degrees come back onto it.
+TEST(Mesh, AlignToSurfaceUndoesASmallRigidMotion) {
+  Mesh corner;
+  const auto quad = [&](Eigen::Vector3d a, Eigen::Vector3d b, Eigen::Vector3d c,
+                        Eigen::Vector3d d) {
+    const int n = int(corner.vertices.size());
+    corner.vertices.insert(corner.vertices.end(), {a, b, c, d});
+    corner.triangles.push_back({n, n + 1, n + 2});
+    corner.triangles.push_back({n, n + 2, n + 3});
+  };
+  quad({0, 0, 0}, {0.3, 0, 0}, {0.3, 0.3, 0}, {0, 0.3, 0});
+  quad({0, 0, 0}, {0, 0.3, 0}, {0, 0.3, 0.2}, {0, 0, 0.2});
+  quad({0, 0, 0}, {0, 0, 0.2}, {0.3, 0, 0.2}, {0.3, 0, 0});
+  const std::vector<Eigen::Vector3d> on = SampleSurface(corner, 3000, 3);
+  const core::Pose motion{Eigen::Vector3d(0.004, -0.003, 0.002),
+                          core::FromRollPitchYaw(0.01, -0.02, 0.035)};
+  std::vector<Eigen::Vector3d> moved;
+  for (const auto& p : on) moved.push_back(motion * p);
+  const core::Pose back = AlignToSurface(moved, corner, 0.02, 20000, 5);
+  double worst = 0;
+  for (const auto& p : on) worst = std::max(worst, ((back * motion) * p - p).norm());
+  EXPECT_LT(worst, 5e-4);
+}
+
 }  // namespace
 }  // namespace twinforge::real2sim

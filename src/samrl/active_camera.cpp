@@ -1,5 +1,7 @@
 #include "samrl/active_camera.h"
 
+#include <spdlog/spdlog.h>
+
 #include <algorithm>
 #include <cmath>
 
@@ -133,6 +135,24 @@ ViewChoice ChooseView(const real2sim::RasterMesh& scene, const core::PinholeIntr
       AscendView(scene, intrinsics, mount, score, sampled.azimuth, sampled.elevation, options);
   refined.scores.insert(refined.scores.begin(), sampled.scores.begin(), sampled.scores.end());
   return refined;
+}
+
+Look ActiveLook(reality::Robot& robot, real2sim::TwinGeometry& twin,
+                const std::vector<std::string>& targets, const OrbitMount& mount,
+                const core::PinholeIntrinsics& search, const core::PinholeIntrinsics& capture,
+                const ViewSearchOptions& options, uint64_t seed) {
+  return [&robot, &twin, targets, mount, search, capture, options,
+          seed](const reality::Observation& o) {
+    std::array<double, 7> q;
+    for (int i = 0; i < 7; ++i) q[i] = o.q[i];
+    const TargetView view = TargetVisibility(twin, q, o.gripper_width, targets);
+    core::Rng rng(seed);
+    const ViewChoice choice = ChooseView(view.mesh, search, mount, view.score, rng, options);
+    spdlog::debug("active look: azimuth {:.2f}, elevation {:.2f}, targets fill {:.1f}%",
+                  choice.azimuth, choice.elevation, choice.score);
+    return std::vector<reality::RgbdFrame>{
+        robot.Capture({OrbitPose(mount, choice.azimuth, choice.elevation), capture})};
+  };
 }
 
 }  // namespace twinforge::samrl

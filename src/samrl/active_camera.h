@@ -18,6 +18,7 @@
 #include "core/se3.h"
 #include "real2sim/calibrate/soft_render.h"
 #include "real2sim/calibrate/twin_geometry.h"
+#include "samrl/twin_actor.h"
 
 namespace twinforge::samrl {
 
@@ -79,5 +80,13 @@ ViewChoice SampleView(const real2sim::RasterMesh& scene, const core::PinholeIntr
 ViewChoice ChooseView(const real2sim::RasterMesh& scene, const core::PinholeIntrinsics& intrinsics,
                       const OrbitMount& mount, const ViewScore& score, core::Rng& rng,
                       const ViewSearchOptions& options = {});
+
+// SAM-RL's active look: at each trial the view that shows `targets` best in the twin (posed at
+// the robot's joints; ChooseView on TargetVisibility, searched at `search` intrinsics), then one
+// frame from there with the robot's movable camera at `capture` intrinsics.
+Look ActiveLook(reality::Robot& robot, real2sim::TwinGeometry& twin,
+                const std::vector<std::string>& targets, const OrbitMount& mount,
+                const core::PinholeIntrinsics& search, const core::PinholeIntrinsics& capture,
+                const ViewSearchOptions& options = {}, uint64_t seed = 1);
 
 }  // namespace twinforge::samrl

@@ -327,6 +327,38 @@ core::Pose Env::SitePose(int site) const {
   return base_.Inverse() * world;
 }
 
+core::Pose Env::BodyPose(int body) const {
+  const core::Pose world{Eigen::Vector3d(data_->xpos + 3 * body),
+                         core::QuatFromMj(data_->xquat + 4 * body)};
+  return base_.Inverse() * world;
+}
+
+void Env::PoseRobot(const ArmVector& q, double finger, double closure) {
+  const auto& r = task_->index().robot;
+  mjData* d = data_.get();
+  for (int i = 0; i < kArmDof; ++i) d->qpos[r.arm_qpos[i]] = q[i];
+  for (int i = 0; i < 2; ++i) d->qpos[r.finger_qpos[i]] = finger;
+  mju_zero(d->qvel, model_->nv);
+  gripper_.closure = closure;
+  mj_kinematics(model_.get(), d);
+}
+
+void Env::PlaceBody(int body, const core::Pose& pose) {
+  const mjModel* m = model_.get();
+  const int free = body >= 0 && body < m->nbody ? FreeJointOf(m, body) : -1;
+  if (free < 0) {
+    const char* name = body >= 0 && body < m->nbody ? mj_id2name(m, mjOBJ_BODY, body) : nullptr;
+    throw core::Error(task_->spec().name + ": body " + (name ? name : std::to_string(body)) +
+                      " has no free joint to place it by");
+  }
+  const core::Pose world = base_ * pose;
+  double* qpos = data_->qpos + m->jnt_qposadr[free];
+  std::copy(world.translation.data(), world.translation.data() + 3, qpos);
+  core::QuatToMj(world.rotation, qpos + 3);
+  mju_zero(data_->qvel + m->jnt_dofadr[free], 6);
+  mj_kinematics(m, data_.get());
+}
+
 core::Pose Env::EePose() const { return SitePose(task_->index().robot.ee_site); }
 
 void MakeProprio(const core::Pose& ee, double finger_left, double finger_right, float* out) {

@@ -77,6 +77,16 @@ class Env {
 
   // Pose of a site in the robot base frame.
   core::Pose SitePose(int site) const;
+  // Pose of a body in the robot base frame.
+  core::Pose BodyPose(int body) const;
+
+  // The twin posed, not simulated: a model of a scene observed elsewhere (SAM-RL's actor reads a
+  // real scene through its twin). The arm at `q`, each finger `finger` m open, the gripper latch
+  // at `closure`, velocities zero; positions recomputed (mj_kinematics).
+  void PoseRobot(const ArmVector& q, double finger, double closure);
+  // A body with a free joint (an object) placed at `pose`, robot base frame; velocities zero,
+  // positions recomputed. Throws core::Error naming a body that has no free joint.
+  void PlaceBody(int body, const core::Pose& pose);
   // Robot base pose in the world.
   const core::Pose& base() const { return base_; }
 

@@ -17,6 +17,33 @@ std::shared_ptr<const Task> DrawerTask() {
   return task;
 }
 
+// The twin posed from outside (SAM-RL's actor mirrors a robot and an estimate in it): the arm's
+// tool and a placed object are where they were put, and a body without a free joint is refused.
+TEST(Env, PoseRobotAndPlaceBodyPoseTheTwinWithoutSimulating) {
+  Env env(std::make_shared<const Task>(LoadTaskSpec("peg_insertion")));
+  env.Reset(3, 1);
+  const ArmVector home = env.ArmPositions();
+  ArmVector q = home;
+  q[0] += 0.2;
+  env.PoseRobot(q, 0.01, 1.0);
+  EXPECT_NEAR((env.ArmPositions() - q).norm(), 0, 1e-12);
+  EXPECT_NEAR(env.FingerOpening(), 0.01, 1e-12);
+  EXPECT_EQ(env.gripper().closure, 1.0);
+  const int peg = mj_name2id(env.model(), mjOBJ_BODY, "peg");
+  const core::Pose there{Eigen::Vector3d(0.45, -0.1, 0.05), core::Yaw(0.3)};
+  env.PlaceBody(peg, there);
+  EXPECT_NEAR((env.BodyPose(peg).translation - there.translation).norm(), 0, 1e-12);
+  EXPECT_NEAR(env.BodyPose(peg).rotation.angularDistance(there.rotation), 0, 1e-9);
+  const int table = mj_name2id(env.model(), mjOBJ_BODY, "table");
+  ASSERT_GE(table, 0);
+  try {
+    env.PlaceBody(table, there);
+    FAIL() << "placed a body without a free joint";
+  } catch (const core::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("table"), std::string::npos) << e.what();
+  }
+}
+
 // A top-down tool turning all the way round, wobbling a little: its proprioceptive quaternion
 // moves smoothly (with the sign chosen by w >= 0 it flipped each time w crossed zero).
 TEST(Env, TheToolsQuaternionDoesNotFlipAsATopDownToolTurns) {

@@ -1,0 +1,288 @@
+#include "samrl/pose_estimate.h"
+
+#include <open3d/t/geometry/RaycastingScene.h>
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+
+#include "core/error.h"
+#include "real2sim/mesh.h"
+#include "sim/camera.h"
+#include "sim/geom_scene.h"
+#include "sim/model.h"
+
+namespace twinforge::samrl {
+
+namespace o3c = open3d::core;
+
+namespace {
+
+// Triangles Open3D can ray-cast and measure distances to.
+std::unique_ptr<open3d::t::geometry::RaycastingScene> MakeScene(const real2sim::Mesh& mesh) {
+  std::vector<float> v;
+  std::vector<uint32_t> t;
+  for (const auto& x : mesh.vertices) v.insert(v.end(), {float(x.x()), float(x.y()), float(x.z())});
+  for (const auto& f : mesh.triangles)
+    if (!real2sim::Degenerate(mesh, f))
+      t.insert(t.end(), {uint32_t(f[0]), uint32_t(f[1]), uint32_t(f[2])});
+  auto scene = std::make_unique<open3d::t::geometry::RaycastingScene>();
+  scene->AddTriangles(o3c::Tensor(v, {int64_t(mesh.vertices.size()), 3}, o3c::Float32),
+                      o3c::Tensor(t, {int64_t(t.size() / 3), 3}, o3c::UInt32));
+  return scene;
+}
+
+o3c::Tensor Points(const std::vector<Eigen::Vector3d>& points) {
+  std::vector<float> q;
+  q.reserve(3 * points.size());
+  for (const auto& x : points) q.insert(q.end(), {float(x.x()), float(x.y()), float(x.z())});
+  return o3c::Tensor(q, {int64_t(points.size()), 3}, o3c::Float32);
+}
+
+// A geom the twin shows (as the calibration's renderer takes them).
+bool Visible(const mjModel* m, int g) {
+  return sim::GeomRgba(m, g)[3] > 0 && m->geom_group[g] <= 2;
+}
+
+}  // namespace
+
+std::vector<Eigen::Vector3d> FramePoints(const reality::RgbdFrame& frame,
+                                         const core::Pose& correction) {
+  const auto& k = frame.intrinsics;
+  if (frame.depth.size() != std::size_t(k.width) * k.height)
+    throw core::Error("frame of camera " + frame.camera + ": " +
+                      std::to_string(frame.depth.size()) + " depth values for a " +
+                      std::to_string(k.width) + "x" + std::to_string(k.height) + " image");
+  const core::Pose to_base = frame.extrinsics * correction;
+  std::vector<Eigen::Vector3d> points;
+  for (int v = 0; v < k.height; ++v)
+    for (int u = 0; u < k.width; ++u) {
+      const uint16_t mm = frame.depth[std::size_t(v) * k.width + u];
+      if (mm == 0) continue;
+      const double z = mm * 1e-3;
+      points.push_back(to_base * Eigen::Vector3d((u - k.cx) / k.fx * z, (v - k.cy) / k.fy * z, z));
+    }
+  return points;
+}
+
+// One object: its surface in its own frame, and the extent of it.
+struct ObjectPoseEstimator::Model {
+  std::string body;
+  int id = -1;
+  core::Pose nominal;
+  std::unique_ptr<open3d::t::geometry::RaycastingScene> surface;
+  double radius = 0;            // m: the farthest vertex from the body's z axis
+  double z_min = 0, z_max = 0;  // m: body frame
+};
+
+ObjectPoseEstimator::ObjectPoseEstimator(std::shared_ptr<const sim::Task> twin,
+                                         const std::vector<std::string>& bodies,
+                                         const PoseEstimateOptions& options)
+    : options_(options), twin_(std::move(twin)), env_(twin_) {
+  env_.Reset(0, 0);
+  const mjModel* m = env_.model();
+  for (const std::string& name : bodies) {
+    auto model = std::make_unique<Model>();
+    model->body = name;
+    model->id = mj_name2id(m, mjOBJ_BODY, name.c_str());
+    if (model->id < 0) throw core::Error(twin_->spec().name + ": the twin has no body " + name);
+    model->nominal = env_.BodyPose(model->id);
+    const auto mine = [&](int g) {
+      return sim::InSubtree(m, m->geom_bodyid[g], model->id) && Visible(m, g);
+    };
+    for (int g = 0; g < m->ngeom; ++g)
+      if (mine(g)) object_geoms_.push_back(g);
+    const real2sim::Mesh mesh =
+        real2sim::PosedGeoms(m, env_.data(), env_.base() * model->nominal, mine);
+    if (mesh.empty())
+      throw core::Error(twin_->spec().name + ": body " + name + " has no visible geometry");
+    model->z_min = mesh.min().z();
+    model->z_max = mesh.max().z();
+    for (const auto& v : mesh.vertices) model->radius = std::max(model->radius, v.head<2>().norm());
+    model->surface = MakeScene(mesh);
+    models_.push_back(std::move(model));
+  }
+}
+
+ObjectPoseEstimator::~ObjectPoseEstimator() = default;
+
+const core::Pose& ObjectPoseEstimator::nominal(int i) const { return models_.at(i)->nominal; }
+
+std::vector<Eigen::Vector3d> ObjectPoseEstimator::Foreground(
+    const std::vector<Eigen::Vector3d>& frame_points, const sim::ArmVector& q, double gripper_width,
+    core::Pose* correction) {
+  env_.PoseRobot(q, 0.5 * gripper_width, 0);
+  const mjModel* m = env_.model();
+  std::sort(object_geoms_.begin(), object_geoms_.end());
+  const real2sim::Mesh background = real2sim::PosedGeoms(m, env_.data(), env_.base(), [&](int g) {
+    return Visible(m, g) && !std::binary_search(object_geoms_.begin(), object_geoms_.end(), g);
+  });
+  core::Pose moved = core::Pose::Identity();
+  if (options_.register_reach > 0)
+    moved = real2sim::AlignToSurface(
+        frame_points,
+        options_.register_to_robot
+            ? real2sim::PosedGeoms(
+                  m, env_.data(), env_.base(),
+                  [&](int g) { return Visible(m, g) && m->geom_group[g] == sim::kRobotGeomGroup; })
+            : background,
+        options_.register_reach, options_.register_samples, 1);
+  if (correction) *correction = moved;
+  std::vector<Eigen::Vector3d> points;
+  points.reserve(frame_points.size());
+  for (const auto& p : frame_points) points.push_back(moved * p);
+  const std::vector<double> d = real2sim::SurfaceDistances(points, background);
+  const auto& w = twin_->spec().workspace;
+  const Eigen::Vector3d lo(w.min[0], w.min[1], w.min[2]), hi(w.max[0], w.max[1], w.max[2]);
+  std::vector<Eigen::Vector3d> out;
+  for (std::size_t i = 0; i < points.size(); ++i)
+    if (d[i] > options_.background && (points[i].array() >= lo.array()).all() &&
+        (points[i].array() <= hi.array()).all())
+      out.push_back(points[i]);
+  return out;
+}
+
+ObjectPose ObjectPoseEstimator::Fit(const Model& model,
+                                    const std::vector<Eigen::Vector3d>& points) const {
+  ObjectPose best;
+  best.body = model.body;
+  best.pose = model.nominal;
+  if (points.empty()) return best;
+  // Starts: the centroids of the points per cell of the table's grid, each at several yaws.
+  std::map<std::pair<int, int>, std::pair<Eigen::Vector3d, int>> cells;
+  for (const auto& p : points) {
+    auto& [sum, n] =
+        cells[{int(std::floor(p.x() / options_.cell)), int(std::floor(p.y() / options_.cell))}];
+    if (n == 0) sum.setZero();
+    sum += p;
+    ++n;
+  }
+  // The points near a pose, in the body's frame: within its outline and height, with margin.
+  const auto near = [&](const core::Pose& pose, double margin, std::vector<Eigen::Vector3d>& local,
+                        std::vector<int>& index) {
+    local.clear();
+    index.clear();
+    const core::Pose inv = pose.Inverse();
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      const Eigen::Vector3d b = inv * points[i];
+      if (b.head<2>().norm() > model.radius + margin || b.z() < model.z_min - margin ||
+          b.z() > model.z_max + margin)
+        continue;
+      local.push_back(b);
+      index.push_back(int(i));
+    }
+  };
+  std::vector<Eigen::Vector3d> local;
+  std::vector<int> index;
+  double best_score = -1e300;
+  for (const auto& [cell, sum_n] : cells) {
+    if (sum_n.second < options_.min_cell_points) continue;
+    const Eigen::Vector3d centroid = sum_n.first / sum_n.second;
+    for (int k = 0; k < options_.yaw_starts; ++k) {
+      core::Pose pose = model.nominal;
+      pose.rotation = core::Yaw(2 * M_PI * k / options_.yaw_starts) * model.nominal.rotation;
+      pose.translation.head<2>() = centroid.head<2>();
+      for (int it = 0; it < options_.iterations; ++it) {
+        const double t = options_.iterations > 1 ? double(it) / (options_.iterations - 1) : 1.0;
+        const double reach =
+            options_.start_reach * std::pow(options_.reach / options_.start_reach, t);
+        near(pose, reach, local, index);
+        if (local.empty()) break;
+        const auto closest = model.surface->ComputeClosestPoints(Points(local), 1);
+        const float* c = closest.at("points").GetDataPtr<float>();
+        // Planar Procrustes: the yaw and shift (about z, in the base frame) that move the model's
+        // closest points onto the measured ones.
+        std::vector<std::pair<Eigen::Vector2d, Eigen::Vector2d>> pairs;
+        for (std::size_t i = 0; i < local.size(); ++i) {
+          const Eigen::Vector3d on(c[3 * i], c[3 * i + 1], c[3 * i + 2]);
+          if ((on - local[i]).norm() > reach) continue;
+          pairs.emplace_back((pose * on).head<2>(), points[index[i]].head<2>());
+        }
+        if (pairs.size() < 3) break;
+        Eigen::Vector2d ms = Eigen::Vector2d::Zero(), mp = Eigen::Vector2d::Zero();
+        for (const auto& [s, p] : pairs) {
+          ms += s;
+          mp += p;
+        }
+        ms /= double(pairs.size());
+        mp /= double(pairs.size());
+        double sin_sum = 0, cos_sum = 0;
+        for (const auto& [s, p] : pairs) {
+          const Eigen::Vector2d a = s - ms, b = p - mp;
+          cos_sum += a.dot(b);
+          sin_sum += a.x() * b.y() - a.y() * b.x();
+        }
+        const double turn = std::atan2(sin_sum, cos_sum);
+        const Eigen::Rotation2Dd r(turn);
+        const Eigen::Vector2d shift = mp - r * ms;
+        pose.rotation = core::Yaw(turn) * pose.rotation;
+        pose.translation.head<2>() = r * pose.translation.head<2>() + shift;
+        if (std::abs(turn) < 1e-6 && shift.norm() < 1e-6) break;
+      }
+      // Score: points the surface explains, less the points inside its outline it does not.
+      near(pose, options_.reach, local, index);
+      if (local.empty()) continue;
+      const auto closest = model.surface->ComputeClosestPoints(Points(local), 1);
+      const float* c = closest.at("points").GetDataPtr<float>();
+      int inliers = 0, outliers = 0;
+      double squares = 0;
+      for (std::size_t i = 0; i < local.size(); ++i) {
+        const double e = (Eigen::Vector3d(c[3 * i], c[3 * i + 1], c[3 * i + 2]) - local[i]).norm();
+        if (e <= options_.inlier) {
+          ++inliers;
+          squares += e * e;
+        } else if (e > options_.reach) {
+          ++outliers;
+        }
+      }
+      const double score = inliers - outliers;
+      if (score > best_score) {
+        best_score = score;
+        best.pose = pose;
+        best.inliers = inliers;
+        best.outliers = outliers;
+        best.rms = inliers ? std::sqrt(squares / inliers) : 0;
+      }
+    }
+  }
+  best.seen = best.inliers >= options_.min_points;
+  if (!best.seen) best.pose = model.nominal;
+  return best;
+}
+
+std::vector<ObjectPose> ObjectPoseEstimator::Estimate(
+    const std::vector<Eigen::Vector3d>& foreground) const {
+  std::vector<ObjectPose> out(models_.size());
+  std::vector<bool> done(models_.size(), false);
+  std::vector<Eigen::Vector3d> points = foreground;
+  for (std::size_t round = 0; round < models_.size(); ++round) {
+    // Every remaining object fitted to the remaining points; the best explained one is kept and
+    // takes its points.
+    int pick = -1;
+    ObjectPose picked;
+    for (std::size_t i = 0; i < models_.size(); ++i) {
+      if (done[i]) continue;
+      ObjectPose fit = Fit(*models_[i], points);
+      if (pick < 0 || fit.inliers - fit.outliers > picked.inliers - picked.outliers) {
+        pick = int(i);
+        picked = fit;
+      }
+    }
+    done[pick] = true;
+    out[pick] = picked;
+    if (!picked.seen) continue;
+    // The points it explains go; a neighbour standing against it keeps its own.
+    const core::Pose inv = picked.pose.Inverse();
+    std::vector<Eigen::Vector3d> local;
+    for (const auto& p : points) local.push_back(inv * p);
+    const o3c::Tensor d = models_[pick]->surface->ComputeDistance(Points(local), 1);
+    const float* dp = d.GetDataPtr<float>();
+    std::vector<Eigen::Vector3d> rest;
+    for (std::size_t i = 0; i < points.size(); ++i)
+      if (dp[i] > options_.reach) rest.push_back(points[i]);
+    points.swap(rest);
+  }
+  return out;
+}
+
+}  // namespace twinforge::samrl

@@ -1,0 +1,105 @@
+// Object poses from depth, SAM-RL's state estimate: the twin's meshes of the movable objects
+// registered to the points of a real frame. The points the twin's fixed geometry (the table, a
+// panel, the arm at its measured joints) explains are dropped; each object is then fitted by
+// planar ICP (position on the table and yaw; objects stand as the twin has them) from starts spread
+// over the remaining points, and scored by the points its surface explains against the points
+// inside its outline it does not. Objects are taken best score first, each removing the points it
+// explains, so two objects never claim the same points. An object with too few points is reported
+// unseen (hidden behind something, or out of view) at the twin's own pose.
+#pragma once
+
+#include <Eigen/Core>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "core/se3.h"
+#include "reality/robot.h"
+#include "sim/env.h"
+
+namespace twinforge::samrl {
+
+struct PoseEstimateOptions {
+  double background = 0.006;  // m: points this close to the twin's fixed geometry are background
+  // The frame first registered to the twin's fixed geometry (a hand camera's pose is known to a
+  // few mm and mrad, enough to miss a hole): point-to-plane ICP within this reach (m), 0 = not.
+  double register_reach = 0.015;
+  int register_samples = 60000;
+  // Registered to the robot's own geometry only (exact, where a scanned table or panel is only as
+  // good as its scan), else to all the fixed geometry.
+  bool register_to_robot = true;
+  double cell = 0.03;       // m: ICP starts at the centroids of foreground points per cell
+  int min_cell_points = 5;  // of a start cell
+  int yaw_starts = 8;       // over a whole turn
+  int iterations = 25;
+  double start_reach = 0.03, reach = 0.006;  // m: correspondences kept, annealed from / to
+  double inlier = 0.003;                     // m: a point the surface explains
+  int min_points = 50;                       // explained points for an object to count as seen
+  template <class A>
+  void Serialize(A& a) {
+    a("background", background);
+    a("register_reach", register_reach);
+    a("register_samples", register_samples);
+    a("register_to_robot", register_to_robot);
+    a("cell", cell);
+    a("min_cell_points", min_cell_points);
+    a("yaw_starts", yaw_starts);
+    a("iterations", iterations);
+    a("start_reach", start_reach);
+    a("reach", reach);
+    a("inlier", inlier);
+    a("min_points", min_points);
+    a.Require(background > 0 && cell > 0 && reach > 0 && start_reach >= reach && inlier > 0,
+              "reach", "positive distances, start_reach >= reach");
+    a.Require(yaw_starts >= 1 && iterations >= 1 && min_points >= 1, "yaw_starts",
+              "at least one start, iteration and point");
+  }
+};
+
+struct ObjectPose {
+  std::string body;
+  core::Pose pose;    // robot base frame (the twin's own pose when not seen)
+  bool seen = false;  // enough points explained
+  int inliers = 0;    // points within options.inlier of the surface
+  int outliers = 0;   // points inside its outline farther than options.reach
+  double rms = 0;     // m, over the inliers
+};
+
+// A depth frame's points in the robot base frame: its reported extrinsics composed with
+// `correction` (the camera's calibration), pixels without a return skipped.
+std::vector<Eigen::Vector3d> FramePoints(const reality::RgbdFrame& frame,
+                                         const core::Pose& correction = core::Pose::Identity());
+
+class ObjectPoseEstimator {
+ public:
+  // The twin task's bodies to estimate (its movable objects). Throws core::Error naming a body the
+  // twin does not have or one with no visible geometry.
+  ObjectPoseEstimator(std::shared_ptr<const sim::Task> twin, const std::vector<std::string>& bodies,
+                      const PoseEstimateOptions& options = {});
+  ~ObjectPoseEstimator();
+
+  // The points of a frame the twin's fixed geometry does not explain, inside the task's
+  // workspace, the arm at `q` with the fingers `gripper_width` apart (the arm is in the frame
+  // too); the frame registered to that geometry first, if the options say so (`correction`: the
+  // rigid motion applied to the points).
+  std::vector<Eigen::Vector3d> Foreground(const std::vector<Eigen::Vector3d>& points,
+                                          const sim::ArmVector& q, double gripper_width,
+                                          core::Pose* correction = nullptr);
+
+  // Every body's pose from foreground points, in the order the bodies were given.
+  std::vector<ObjectPose> Estimate(const std::vector<Eigen::Vector3d>& foreground) const;
+
+  // The twin's own pose of body i.
+  const core::Pose& nominal(int i) const;
+
+ private:
+  struct Model;
+  ObjectPose Fit(const Model& model, const std::vector<Eigen::Vector3d>& points) const;
+  PoseEstimateOptions options_;
+  std::shared_ptr<const sim::Task> twin_;
+  sim::Env env_;
+  std::vector<std::unique_ptr<Model>> models_;
+  std::vector<int> object_geoms_;  // geoms of the estimated bodies (not background)
+};
+
+}  // namespace twinforge::samrl
