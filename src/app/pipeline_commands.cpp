@@ -10,10 +10,14 @@
 #include "core/config.h"
 #include "core/error.h"
 #include "core/log.h"
+#include "learn/torch_runtime.h"
 #include "pipeline/main_job.h"
 #include "pipeline/reality_eval.h"
 #include "pipeline/residual_training.h"
+#include "pipeline/run_directory.h"
 #include "reality/proxy_reality.h"
+#include "samrl/active_camera.h"
+#include "samrl/twin_actor.h"
 #include "sim/task.h"
 
 namespace twinforge::app {
@@ -23,6 +27,8 @@ namespace {
 struct EvalCli {
   RealityCli reality;
   std::string policy, task, out;
+  std::string actor = "policy", look = "active", register_to = "robot";
+  int capture_scale = 8;
   std::vector<int> levels = {1, 2, 3};
   pipeline::RealityEvalOptions options;
   bool grader_state = false;
@@ -41,17 +47,73 @@ bool AskPerson(const pipeline::TrialRecord& t) {
   }
 }
 
+// SAM-RL's twin actor on `robot`: the twin's expert on the objects a frame shows, the frame taken
+// from the view the twin says shows them best (or from the task camera's pose).
+pipeline::RealityEvalReport EvaluateTwinActor(reality::Robot& robot, const sim::TaskSpec& task,
+                                              const EvalCli& cli,
+                                              const pipeline::SuccessJudge& judge,
+                                              core::Progress& progress) {
+  if (!robot.Info().can_scan)
+    throw core::Error("eval --actor twin: " + robot.Info().name +
+                      " has no camera it can move (it does not answer capture)");
+  learn::PinMathThreads(1);
+  auto twin = std::make_shared<const sim::Task>(task);
+  const sim::Camera camera = sim::MakeCamera(task.camera);
+  const sim::CameraIntrinsics capture =
+      samrl::ScaleIntrinsics(camera.intrinsics, cli.capture_scale);
+  real2sim::TwinGeometry geometry(task, 600);
+  samrl::ViewSearchOptions search;
+  search.samples = 24;
+  search.steps = 30;
+  const samrl::Look look =
+      cli.look == "fixed"
+          ? samrl::FixedLook(robot, camera.pose, capture)
+          : samrl::ActiveLook(robot, geometry, task.objects, samrl::ObjectsMount(*twin),
+                              {40, 30, 36, 36, 19.5, 14.5}, capture, search, cli.options.seed);
+  samrl::PoseEstimateOptions estimate;
+  estimate.register_to_robot = cli.register_to == "robot";
+  samrl::TwinActor actor(twin, robot, look, robot.Info().has_success_oracle, estimate);
+  const nlohmann::json header = {{"actor", "twin"},
+                                 {"twin_hash", pipeline::Fingerprint()
+                                                   .AddFile(task.file)
+                                                   .AddFile(task.file.parent_path() / task.scene)
+                                                   .Hex()},
+                                 {"look", cli.look},
+                                 {"capture", {capture.width, capture.height}}};
+  return pipeline::EvaluateOperatorOnReality(
+      robot, {&actor, [&](uint64_t seed) { actor.Begin(seed); }, header}, task, cli.options,
+      cli.out, judge, &progress);
+}
+
 void AddEval(CLI::App& parent, int& exit_code) {
   auto cli = std::make_shared<EvalCli>();
   auto* c = parent.add_subcommand(
       "eval",
-      "run a point-cloud policy on reality: seeded trials per level, success from the robot's "
-      "oracle or asked of you, 95% intervals; every trial logged (JSON report)");
+      "run a point-cloud policy (or SAM-RL's twin actor) on reality: seeded trials per level, "
+      "success from the robot's oracle or asked of you, 95% intervals; every trial logged (JSON "
+      "report)");
   cli->reality.Add(c);
   c->add_option("--policy", cli->policy, "point-cloud policy (train bc / train distill)")
-      ->required()
       ->check(CLI::ExistingFile);
-  c->add_option("--task", cli->task, "task name or task.yaml")->required();
+  c->add_option(
+       "--task", cli->task,
+       "task name or task.yaml (with --actor twin: the twin's, e.g. RUN/calibrated/task.yaml)")
+      ->required();
+  c->add_option("--actor", cli->actor,
+                "policy: the --policy file; twin: SAM-RL's base actor, the twin's expert acting on "
+                "object poses estimated from a frame of the robot's movable camera")
+      ->check(CLI::IsMember({"policy", "twin"}));
+  c->add_option("--look", cli->look,
+                "twin actor: where its camera looks from: active (the view that shows the objects "
+                "best in the twin) or fixed (the task camera's pose)")
+      ->check(CLI::IsMember({"active", "fixed"}));
+  c->add_option("--register-to", cli->register_to,
+                "twin actor: what the frame is registered to before the objects are fitted: robot "
+                "(the arm, exact) or fixed (all of the twin's fixed geometry: the table, panels)")
+      ->check(CLI::IsMember({"robot", "fixed"}));
+  c->add_option("--capture-scale", cli->capture_scale,
+                "twin actor: the frame's resolution, as a multiple of the task camera's")
+      ->check(CLI::Range(1, 16));
   c->add_option("--levels", cli->levels, "randomization levels, e.g. 1,2,3")
       ->delimiter(',')
       ->check(CLI::Range(0, 3));
@@ -72,6 +134,11 @@ void AddEval(CLI::App& parent, int& exit_code) {
                 "gripper width; the hidden state too with --grader-state)");
   c->callback([cli, &exit_code] {
     cli->options.levels = cli->levels;
+    if ((cli->actor == "policy") == cli->policy.empty())
+      throw core::Error(cli->actor == "policy" ? "eval: --policy FILE is needed (or --actor twin)"
+                                               : "eval --actor twin: takes no --policy");
+    if (cli->actor == "twin" && !cli->options.residual.empty())
+      throw core::Error("eval --actor twin: no residual for the twin actor yet");
     const sim::TaskSpec task = sim::LoadTaskSpec(cli->task);
     const std::string proxy = "proxy:";
     std::unique_ptr<reality::ProxyReality> world;
@@ -90,12 +157,20 @@ void AddEval(CLI::App& parent, int& exit_code) {
     }
     reality::Robot& robot = world ? static_cast<reality::Robot&>(*world) : connection->robot();
     core::Progress progress("eval", int64_t(cli->levels.size()) * cli->options.trials, "trials");
-    const pipeline::RealityEvalReport r = pipeline::EvaluateOnReality(
-        robot, cli->policy, task, cli->options, cli->out,
-        ::isatty(STDIN_FILENO) ? pipeline::SuccessJudge(AskPerson) : nullptr, &progress);
+    const pipeline::SuccessJudge judge =
+        ::isatty(STDIN_FILENO) ? pipeline::SuccessJudge(AskPerson) : nullptr;
+    const pipeline::RealityEvalReport r =
+        cli->actor == "twin" ? EvaluateTwinActor(robot, task, *cli, judge, progress)
+                             : pipeline::EvaluateOnReality(robot, cli->policy, task, cli->options,
+                                                           cli->out, judge, &progress);
     progress.Finish();
     nlohmann::json report = pipeline::ToJson(r);
-    report["policy"] = cli->policy;
+    if (cli->actor == "twin") {
+      report["actor"] = "twin";
+      report["look"] = cli->look;
+    } else {
+      report["policy"] = cli->policy;
+    }
     if (!cli->options.residual.empty()) report["residual"] = cli->options.residual;
     report["task"] = task.name;
     report["reality"] = connection ? connection->address() : cli->reality.address;

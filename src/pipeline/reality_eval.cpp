@@ -4,6 +4,7 @@
 #include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <optional>
 
 #include "core/error.h"
 #include "core/image.h"
@@ -61,20 +62,12 @@ RealityEvalReport EvaluateOnReality(reality::Robot& robot, const std::filesystem
                                     const sim::TaskSpec& task, const RealityEvalOptions& options,
                                     const std::filesystem::path& log, const SuccessJudge& judge,
                                     core::Progress* progress) {
-  const auto start = core::Clock::now();
   if (options.trials <= 0 || options.levels.empty())
     throw core::ConfigError("eval", "trials", "at least one trial at one level");
   learn::PolicyNet net = LoadRobotPolicy(policy, task);
   const reality::RobotInfo info = robot.Info();
-  if (!info.has_success_oracle && !judge)
-    throw core::Error(info.name + " cannot tell success by itself and no one was asked to judge");
-
-  // The log: a header naming the policy and protocol, then one line per trial.
   nlohmann::json header = {{"policy", policy.string()},
                            {"policy_hash", Fingerprint().AddFile(policy).Hex()},
-                           {"task", task.name},
-                           {"robot", info.name},
-                           {"seed", options.seed},
                            {"sample", options.sample},
                            {"points", {options.scene_points, options.arm_points}}};
   std::unique_ptr<learn::OffPolicyAgent> residual;
@@ -88,23 +81,54 @@ RealityEvalReport EvaluateOnReality(reality::Robot& robot, const std::filesystem
     header["residual"] = options.residual.string();
     header["residual_hash"] = Fingerprint().AddFile(options.residual).Hex();
   }
+  reality::ActionClient client(robot, task.control.limits);
+  PolicyOperator op(robot, net, task, options.scene_points, options.arm_points, options.sample,
+                    info.has_success_oracle);
+  op.SetResidual(residual.get(), &client, false);
+  return EvaluateOperatorOnReality(robot,
+                                   {&op, [&](uint64_t seed) { op.Begin(seed); }, header, &client},
+                                   task, options, log, judge, progress);
+}
+
+RealityEvalReport EvaluateOperatorOnReality(reality::Robot& robot, const TrialOperator& subject,
+                                            const sim::TaskSpec& task,
+                                            const RealityEvalOptions& options,
+                                            const std::filesystem::path& log,
+                                            const SuccessJudge& judge, core::Progress* progress) {
+  const auto start = core::Clock::now();
+  if (options.trials <= 0 || options.levels.empty())
+    throw core::ConfigError("eval", "trials", "at least one trial at one level");
+  const reality::RobotInfo info = robot.Info();
+  if (!info.has_success_oracle && !judge)
+    throw core::Error(info.name + " cannot tell success by itself and no one was asked to judge");
+
+  // The log: a header naming what runs and the protocol, then one line per trial.
+  nlohmann::json header = subject.header;
+  header["task"] = task.name;
+  header["robot"] = info.name;
+  header["seed"] = options.seed;
   std::map<std::pair<int, int>, TrialRecord> done;
   auto same_trials = [&] {
     std::ifstream in(log);
     std::string line;
     std::getline(in, line);
     const nlohmann::json old = nlohmann::json::parse(line, nullptr, false);
-    return !old.is_discarded() && old.value("policy_hash", "") == header["policy_hash"] &&
-           old.value("task", "") == task.name && old.value("seed", uint64_t(0)) == options.seed &&
-           old.value("sample", !options.sample) == options.sample &&
-           old.value("residual_hash", "") == header.value("residual_hash", "");
+    if (old.is_discarded() || !old.is_object()) return false;
+    const auto identifies = [](const std::string& key) {
+      return key != "policy" && key != "residual";
+    };
+    for (const auto& [key, value] : header.items())
+      if (identifies(key) && (!old.contains(key) || old[key] != value)) return false;
+    for (const auto& [key, value] : old.items())
+      if (identifies(key) && !header.contains(key)) return false;
+    return true;
   };
   if (std::filesystem::exists(log) && std::filesystem::file_size(log) > 0 && !same_trials()) {
     if (!options.set_aside_other_logs)
       throw core::Error(
           log.string() +
-          ": a trial log of another policy, residual, task or protocol; give another --out or "
-          "remove it");
+          ": a trial log of another policy, residual, actor, task or protocol; give another --out "
+          "or remove it");
     std::filesystem::path previous = log;
     previous += ".previous";
     spdlog::info("eval: {} holds other trials; kept as {}", log.string(), previous.string());
@@ -143,10 +167,9 @@ RealityEvalReport EvaluateOnReality(reality::Robot& robot, const std::filesystem
       throw core::IoError("eval: cannot write the step trace to " + options.trace.string());
   }
 
-  reality::ActionClient client(robot, task.control.limits);
-  PolicyOperator op(robot, net, task, options.scene_points, options.arm_points, options.sample,
-                    info.has_success_oracle);
-  op.SetResidual(residual.get(), &client, false);
+  std::optional<reality::ActionClient> own;
+  if (!subject.client) own.emplace(robot, task.control.limits);
+  reality::ActionClient& client = subject.client ? *subject.client : *own;
   RealityEvalReport report;
   for (int level : options.levels) {
     bool shown[2] = {false, false};  // a failure's frame, a success's frame
@@ -165,7 +188,7 @@ RealityEvalReport EvaluateOnReality(reality::Robot& robot, const std::filesystem
         r.seed = core::MixSeed(options.seed, 1000 * uint64_t(level) + uint64_t(i));
         reality::Observation o = robot.Reset({r.seed, level});
         client.ResetGripper();
-        op.Begin(r.seed);
+        subject.begin(r.seed);
         int step = 0;
         const reality::BeforeAct trace_step = [&](const reality::Observation& seen,
                                                   const sim::Action& action) {
@@ -179,7 +202,7 @@ RealityEvalReport EvaluateOnReality(reality::Robot& robot, const std::filesystem
           if (options.grader) j["grader"] = options.grader();
           trace << j.dump() << "\n";
         };
-        r.steps = reality::RunOperator(robot, op, client, o, task.horizon, true,
+        r.steps = reality::RunOperator(robot, *subject.op, client, o, task.horizon, true,
                                        trace.is_open() ? trace_step : reality::BeforeAct())
                       .actions;
         if (trace.is_open()) trace << std::flush;

@@ -19,6 +19,7 @@
 #include "core/progress.h"
 #include "core/rng.h"
 #include "reality/robot.h"
+#include "reality/teleop.h"
 #include "sim/task.h"
 
 namespace twinforge::pipeline {
@@ -86,5 +87,24 @@ RealityEvalReport EvaluateOnReality(reality::Robot& robot, const std::filesystem
                                     const std::filesystem::path& log,
                                     const SuccessJudge& judge = nullptr,
                                     core::Progress* progress = nullptr);
+
+// What the trials run when it is not a point-cloud policy (SAM-RL's twin actor): an operator at
+// the robot's controls, begun before each trial with the trial's seed, and the log header that
+// names it. A log is resumed when its header names the same thing: every key compared, except
+// the file paths "policy" and "residual" (the same file may move).
+struct TrialOperator {
+  reality::Operator* op = nullptr;
+  std::function<void(uint64_t seed)> begin;
+  nlohmann::json header;
+  reality::ActionClient* client = nullptr;  // sends the actions (null: one of the task's limits)
+};
+// The same trials, log and intervals for any operator; options' policy-only fields (sample,
+// points, residual) are the caller's to honour.
+RealityEvalReport EvaluateOperatorOnReality(reality::Robot& robot, const TrialOperator& subject,
+                                            const sim::TaskSpec& task,
+                                            const RealityEvalOptions& options,
+                                            const std::filesystem::path& log,
+                                            const SuccessJudge& judge = nullptr,
+                                            core::Progress* progress = nullptr);
 
 }  // namespace twinforge::pipeline

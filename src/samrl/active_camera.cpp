@@ -137,6 +137,22 @@ ViewChoice ChooseView(const real2sim::RasterMesh& scene, const core::PinholeIntr
   return refined;
 }
 
+OrbitMount ObjectsMount(const sim::Task& twin) {
+  sim::Env env(std::make_shared<const sim::Task>(twin.spec()));
+  env.Reset(0, 0);
+  OrbitMount mount;
+  mount.center.setZero();
+  for (int body : twin.index().object_bodies) mount.center += env.BodyPose(body).translation;
+  if (!twin.index().object_bodies.empty())
+    mount.center /= double(twin.index().object_bodies.size());
+  mount.radius = 0.6;
+  mount.min_azimuth = -2.5;
+  mount.max_azimuth = 2.5;
+  mount.min_elevation = 0.8;
+  mount.max_elevation = 1.3;
+  return mount;
+}
+
 Look ActiveLook(reality::Robot& robot, real2sim::TwinGeometry& twin,
                 const std::vector<std::string>& targets, const OrbitMount& mount,
                 const core::PinholeIntrinsics& search, const core::PinholeIntrinsics& capture,

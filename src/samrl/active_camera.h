@@ -81,6 +81,11 @@ ViewChoice ChooseView(const real2sim::RasterMesh& scene, const core::PinholeIntr
                       const OrbitMount& mount, const ViewScore& score, core::Rng& rng,
                       const ViewSearchOptions& options = {});
 
+// A mount that looks at a twin's objects: centred on their mean position at the twin's own
+// poses, 0.6 m out, from above (elevation 0.8-1.3 rad: a low view sees the table at a graze and
+// few of the arm's points the frame is registered by), all round but behind the robot.
+OrbitMount ObjectsMount(const sim::Task& twin);
+
 // SAM-RL's active look: at each trial the view that shows `targets` best in the twin (posed at
 // the robot's joints; ChooseView on TargetVisibility, searched at `search` intrinsics), then one
 // frame from there with the robot's movable camera at `capture` intrinsics.

@@ -95,7 +95,12 @@ reality::OperatorInput TwinActor::Next(const reality::Observation& o) {
         carried_ = int(i);
       }
     }
-    if (carried_ >= 0) carried_in_tool_ = tool.Inverse() * env_.BodyPose(bodies_[carried_]);
+    if (carried_ >= 0) {
+      carried_in_tool_ = tool.Inverse() * env_.BodyPose(bodies_[carried_]);
+      // Closing fingers centre what they close on between them (the tool's y is their axis):
+      // where the tool stopped short of the estimate along it, the object was pushed along.
+      carried_in_tool_.translation.y() = 0;
+    }
   } else if (closure <= 0.5) {
     carried_ = -1;
   }
