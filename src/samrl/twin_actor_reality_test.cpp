@@ -95,20 +95,12 @@ TEST(ActiveLook, FindsTheHoleTheFixedViewCannotSee) {
   Scene scene("peg_insertion_occluded");
   const sim::CameraIntrinsics capture = ScaleIntrinsics(scene.camera.intrinsics, 8);
   real2sim::TwinGeometry geometry(scene.spec, 600);
-  OrbitMount mount;
-  sim::Env nominal(scene.task);
-  nominal.Reset(0, 0);
-  mount.center = nominal.SitePose(mj_name2id(nominal.model(), mjOBJ_SITE, "hole_top")).translation;
-  mount.radius = 0.6;
-  mount.min_azimuth = -2.5;
-  mount.max_azimuth = 2.5;
-  mount.min_elevation = 0.8;
-  mount.max_elevation = 1.3;
   ViewSearchOptions search;
   search.samples = 24;
   search.steps = 30;
-  const Look active = ActiveLook(scene.proxy, geometry, {"hole_block", "peg"}, mount,
-                                 {40, 30, 36, 36, 19.5, 14.5}, capture, search, 2);
+  const Look active =
+      ActiveLook(scene.proxy, geometry, scene.spec.objects, ObjectsMount(*scene.task),
+                 {40, 30, 36, 36, 19.5, 14.5}, capture, search, 2);
   const Look fixed = FixedLook(scene.proxy, scene.camera.pose, capture);
   for (uint64_t seed : {100, 101}) {
     const auto from_fixed = scene.Estimate(seed, fixed);
