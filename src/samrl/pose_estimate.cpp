@@ -148,9 +148,11 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model,
   best.body = model.body;
   best.pose = model.nominal;
   if (points.empty()) return best;
-  // Starts: the centroids of the points per cell of the table's grid, each at several yaws.
+  // Starts: the centroids of the points per cell of the table's grid, within the search radius of
+  // the twin's own pose, each at several yaws.
   std::map<std::pair<int, int>, std::pair<Eigen::Vector3d, int>> cells;
   for (const auto& p : points) {
+    if ((p.head<2>() - model.nominal.translation.head<2>()).norm() > options_.search) continue;
     auto& [sum, n] =
         cells[{int(std::floor(p.x() / options_.cell)), int(std::floor(p.y() / options_.cell))}];
     if (n == 0) sum.setZero();
