@@ -102,6 +102,7 @@ ObjectPoseEstimator::ObjectPoseEstimator(std::shared_ptr<const sim::Task> twin,
     model->surface = MakeScene(mesh);
     models_.push_back(std::move(model));
   }
+  std::sort(object_geoms_.begin(), object_geoms_.end());
 }
 
 ObjectPoseEstimator::~ObjectPoseEstimator() = default;
@@ -113,7 +114,6 @@ std::vector<Eigen::Vector3d> ObjectPoseEstimator::Foreground(
     core::Pose* correction) {
   env_.PoseRobot(q, 0.5 * gripper_width, 0);
   const mjModel* m = env_.model();
-  std::sort(object_geoms_.begin(), object_geoms_.end());
   const real2sim::Mesh background = real2sim::PosedGeoms(m, env_.data(), env_.base(), [&](int g) {
     return Visible(m, g) && !std::binary_search(object_geoms_.begin(), object_geoms_.end(), g);
   });
