@@ -112,24 +112,64 @@ bool Degenerate(const Mesh& mesh, const Eigen::Vector3i& t) {
   return (v[t[1]] - v[t[0]]).cross(v[t[2]] - v[t[0]]).squaredNorm() < 1e-24;
 }
 
-std::vector<double> SurfaceDistances(const std::vector<Eigen::Vector3d>& points, const Mesh& mesh) {
-  std::vector<double> distances(points.size(), std::numeric_limits<double>::infinity());
-  if (mesh.empty() || points.empty()) return distances;
+namespace {
+
+open3d::core::Tensor PointTensor(const std::vector<Eigen::Vector3d>& points) {
+  std::vector<float> q;
+  q.reserve(3 * points.size());
+  for (const auto& x : points) q.insert(q.end(), {float(x.x()), float(x.y()), float(x.z())});
+  return open3d::core::Tensor(q, {int64_t(points.size()), 3}, open3d::core::Float32);
+}
+
+}  // namespace
+
+struct SurfaceQuery::Impl {
+  open3d::t::geometry::RaycastingScene scene;
+  bool empty = true;
+};
+
+SurfaceQuery::SurfaceQuery(const Mesh& mesh) : impl_(std::make_unique<Impl>()) {
   namespace o3c = open3d::core;
-  std::vector<float> v, q;
+  std::vector<float> v;
   std::vector<uint32_t> t;
   for (const auto& x : mesh.vertices) v.insert(v.end(), {float(x.x()), float(x.y()), float(x.z())});
   for (const auto& f : mesh.triangles)
     if (!Degenerate(mesh, f)) t.insert(t.end(), {uint32_t(f[0]), uint32_t(f[1]), uint32_t(f[2])});
-  for (const auto& x : points) q.insert(q.end(), {float(x.x()), float(x.y()), float(x.z())});
-  open3d::t::geometry::RaycastingScene scene;
-  scene.AddTriangles(o3c::Tensor(v, {int64_t(mesh.vertices.size()), 3}, o3c::Float32),
-                     o3c::Tensor(t, {int64_t(t.size() / 3), 3}, o3c::UInt32));
-  const o3c::Tensor d =
-      scene.ComputeDistance(o3c::Tensor(q, {int64_t(points.size()), 3}, o3c::Float32));
+  if (t.empty()) return;
+  impl_->empty = false;
+  impl_->scene.AddTriangles(o3c::Tensor(v, {int64_t(mesh.vertices.size()), 3}, o3c::Float32),
+                            o3c::Tensor(t, {int64_t(t.size() / 3), 3}, o3c::UInt32));
+}
+
+SurfaceQuery::~SurfaceQuery() = default;
+SurfaceQuery::SurfaceQuery(SurfaceQuery&&) noexcept = default;
+SurfaceQuery& SurfaceQuery::operator=(SurfaceQuery&&) noexcept = default;
+
+std::vector<double> SurfaceQuery::Distances(const std::vector<Eigen::Vector3d>& points,
+                                            int threads) const {
+  std::vector<double> distances(points.size(), std::numeric_limits<double>::infinity());
+  if (impl_->empty || points.empty()) return distances;
+  const open3d::core::Tensor d = impl_->scene.ComputeDistance(PointTensor(points), threads);
   const float* dp = d.GetDataPtr<float>();
   for (std::size_t i = 0; i < points.size(); ++i) distances[i] = dp[i];
   return distances;
+}
+
+std::vector<Eigen::Vector3d> SurfaceQuery::Closest(const std::vector<Eigen::Vector3d>& points,
+                                                   int threads) const {
+  if (impl_->empty) throw core::Error("closest points asked of a surface without triangles");
+  std::vector<Eigen::Vector3d> closest;
+  if (points.empty()) return closest;
+  const auto answer = impl_->scene.ComputeClosestPoints(PointTensor(points), threads);
+  const float* c = answer.at("points").GetDataPtr<float>();
+  closest.reserve(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i)
+    closest.emplace_back(c[3 * i], c[3 * i + 1], c[3 * i + 2]);
+  return closest;
+}
+
+std::vector<double> SurfaceDistances(const std::vector<Eigen::Vector3d>& points, const Mesh& mesh) {
+  return SurfaceQuery(mesh).Distances(points);
 }
 
 Mesh PosedGeoms(const mjModel* m, const mjData* d, const core::Pose& frame,

@@ -7,6 +7,7 @@
 #include <Eigen/Core>
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <vector>
 
 #include "core/se3.h"
@@ -82,6 +83,26 @@ bool Degenerate(const Mesh& mesh, const Eigen::Vector3i& t);
 // casting scene; infinity if the mesh is empty; triangles without area skipped). Exact where
 // NearestDistances to samples of a surface is off by their spacing.
 std::vector<double> SurfaceDistances(const std::vector<Eigen::Vector3d>& points, const Mesh& mesh);
+
+// A mesh's triangles held for repeated exact queries (Open3D's ray casting scene, kept out of
+// this header; triangles without area skipped). `threads`: Open3D's, 0 = all; every point is
+// answered alone, so the answers do not depend on it.
+class SurfaceQuery {
+ public:
+  explicit SurfaceQuery(const Mesh& mesh);
+  ~SurfaceQuery();
+  SurfaceQuery(SurfaceQuery&&) noexcept;
+  SurfaceQuery& operator=(SurfaceQuery&&) noexcept;
+  // Each point's distance (m) to the triangles (infinity if there are none).
+  std::vector<double> Distances(const std::vector<Eigen::Vector3d>& points, int threads = 0) const;
+  // Each point's nearest point on the triangles (the mesh must have some).
+  std::vector<Eigen::Vector3d> Closest(const std::vector<Eigen::Vector3d>& points,
+                                       int threads = 0) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
 
 // The mean of the points (zero for none).
 Eigen::Vector3d Centroid(const std::vector<Eigen::Vector3d>& points);

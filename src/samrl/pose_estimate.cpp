@@ -1,10 +1,9 @@
 #include "samrl/pose_estimate.h"
 
-#include <open3d/t/geometry/RaycastingScene.h>
-
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <optional>
 
 #include "core/error.h"
 #include "real2sim/mesh.h"
@@ -14,30 +13,7 @@
 
 namespace twinforge::samrl {
 
-namespace o3c = open3d::core;
-
 namespace {
-
-// Triangles Open3D can ray-cast and measure distances to.
-std::unique_ptr<open3d::t::geometry::RaycastingScene> MakeScene(const real2sim::Mesh& mesh) {
-  std::vector<float> v;
-  std::vector<uint32_t> t;
-  for (const auto& x : mesh.vertices) v.insert(v.end(), {float(x.x()), float(x.y()), float(x.z())});
-  for (const auto& f : mesh.triangles)
-    if (!real2sim::Degenerate(mesh, f))
-      t.insert(t.end(), {uint32_t(f[0]), uint32_t(f[1]), uint32_t(f[2])});
-  auto scene = std::make_unique<open3d::t::geometry::RaycastingScene>();
-  scene->AddTriangles(o3c::Tensor(v, {int64_t(mesh.vertices.size()), 3}, o3c::Float32),
-                      o3c::Tensor(t, {int64_t(t.size() / 3), 3}, o3c::UInt32));
-  return scene;
-}
-
-o3c::Tensor Points(const std::vector<Eigen::Vector3d>& points) {
-  std::vector<float> q;
-  q.reserve(3 * points.size());
-  for (const auto& x : points) q.insert(q.end(), {float(x.x()), float(x.y()), float(x.z())});
-  return o3c::Tensor(q, {int64_t(points.size()), 3}, o3c::Float32);
-}
 
 // A geom the twin shows (as the calibration's renderer takes them).
 bool Visible(const mjModel* m, int g) {
@@ -70,7 +46,7 @@ struct ObjectPoseEstimator::Model {
   std::string body;
   int id = -1;
   core::Pose nominal;
-  std::unique_ptr<open3d::t::geometry::RaycastingScene> surface;
+  std::optional<real2sim::SurfaceQuery> surface;
   double radius = 0;            // m: the farthest vertex from the body's z axis
   double z_min = 0, z_max = 0;  // m: body frame
 };
@@ -99,7 +75,7 @@ ObjectPoseEstimator::ObjectPoseEstimator(std::shared_ptr<const sim::Task> twin,
     model->z_min = mesh.min().z();
     model->z_max = mesh.max().z();
     for (const auto& v : mesh.vertices) model->radius = std::max(model->radius, v.head<2>().norm());
-    model->surface = MakeScene(mesh);
+    model->surface.emplace(mesh);
     models_.push_back(std::move(model));
   }
   std::sort(object_geoms_.begin(), object_geoms_.end());
@@ -190,13 +166,12 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model,
             options_.start_reach * std::pow(options_.reach / options_.start_reach, t);
         near(pose, reach, local, index);
         if (local.empty()) break;
-        const auto closest = model.surface->ComputeClosestPoints(Points(local), 1);
-        const float* c = closest.at("points").GetDataPtr<float>();
+        const std::vector<Eigen::Vector3d> closest = model.surface->Closest(local, 1);
         // Planar Procrustes: the yaw and shift (about z, in the base frame) that move the model's
         // closest points onto the measured ones.
         std::vector<std::pair<Eigen::Vector2d, Eigen::Vector2d>> pairs;
         for (std::size_t i = 0; i < local.size(); ++i) {
-          const Eigen::Vector3d on(c[3 * i], c[3 * i + 1], c[3 * i + 2]);
+          const Eigen::Vector3d& on = closest[i];
           if ((on - local[i]).norm() > reach) continue;
           pairs.emplace_back((pose * on).head<2>(), points[index[i]].head<2>());
         }
@@ -224,12 +199,11 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model,
       // Score: points the surface explains, less the points inside its outline it does not.
       near(pose, options_.reach, local, index);
       if (local.empty()) continue;
-      const auto closest = model.surface->ComputeClosestPoints(Points(local), 1);
-      const float* c = closest.at("points").GetDataPtr<float>();
+      const std::vector<Eigen::Vector3d> closest = model.surface->Closest(local, 1);
       int inliers = 0, outliers = 0;
       double squares = 0;
       for (std::size_t i = 0; i < local.size(); ++i) {
-        const double e = (Eigen::Vector3d(c[3 * i], c[3 * i + 1], c[3 * i + 2]) - local[i]).norm();
+        const double e = (closest[i] - local[i]).norm();
         if (e <= options_.inlier) {
           ++inliers;
           squares += e * e;
@@ -277,8 +251,7 @@ std::vector<ObjectPose> ObjectPoseEstimator::Estimate(
     const core::Pose inv = picked.pose.Inverse();
     std::vector<Eigen::Vector3d> local;
     for (const auto& p : points) local.push_back(inv * p);
-    const o3c::Tensor d = models_[pick]->surface->ComputeDistance(Points(local), 1);
-    const float* dp = d.GetDataPtr<float>();
+    const std::vector<double> dp = models_[pick]->surface->Distances(local, 1);
     std::vector<Eigen::Vector3d> rest;
     for (std::size_t i = 0; i < points.size(); ++i)
       if (dp[i] > options_.reach) rest.push_back(points[i]);
