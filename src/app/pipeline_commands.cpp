@@ -29,6 +29,7 @@ struct EvalCli {
   std::string policy, task, out;
   std::string actor = "policy", look = "active", register_to = "robot";
   int capture_scale = 8;
+  samrl::RelookOptions relook;
   std::vector<int> levels = {1, 2, 3};
   pipeline::RealityEvalOptions options;
   bool grader_state = false;
@@ -72,13 +73,16 @@ pipeline::RealityEvalReport EvaluateTwinActor(reality::Robot& robot, const sim::
                               {40, 30, 36, 36, 19.5, 14.5}, capture, search, cli.options.seed);
   samrl::PoseEstimateOptions estimate;
   estimate.register_to_robot = cli.register_to == "robot";
-  samrl::TwinActor actor(twin, robot, look, robot.Info().has_success_oracle, estimate);
+  samrl::TwinActor actor(twin, robot, look, robot.Info().has_success_oracle, estimate, {},
+                         cli.relook);
   const nlohmann::json header = {{"actor", "twin"},
                                  {"twin_hash", pipeline::Fingerprint()
                                                    .AddFile(task.file)
                                                    .AddFile(task.file.parent_path() / task.scene)
                                                    .Hex()},
                                  {"look", cli.look},
+                                 {"max_looks", cli.relook.max_looks},
+                                 {"moved", cli.relook.moved},
                                  {"capture", {capture.width, capture.height}}};
   return pipeline::EvaluateOperatorOnReality(
       robot, {&actor, [&](uint64_t seed) { actor.Begin(seed); }, header}, task, cli.options,
@@ -114,6 +118,14 @@ void AddEval(CLI::App& parent, int& exit_code) {
   c->add_option("--capture-scale", cli->capture_scale,
                 "twin actor: the frame's resolution, as a multiple of the task camera's")
       ->check(CLI::Range(1, 16));
+  c->add_option("--max-looks", cli->relook.max_looks,
+                "twin actor: looks per trial at most, the first included; the task's expert steps "
+                "marked look are done again when a look finds an object moved (1: look once)")
+      ->check(CLI::PositiveNumber);
+  c->add_option("--moved", cli->relook.moved,
+                "twin actor: m an object must be found from where it was believed to count as "
+                "moved (smaller shifts are the estimate's own scatter)")
+      ->check(CLI::PositiveNumber);
   c->add_option("--levels", cli->levels, "randomization levels, e.g. 1,2,3")
       ->delimiter(',')
       ->check(CLI::Range(0, 3));

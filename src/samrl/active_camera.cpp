@@ -157,18 +157,29 @@ Look ActiveLook(reality::Robot& robot, real2sim::TwinGeometry& twin,
                 const std::vector<std::string>& targets, const OrbitMount& mount,
                 const core::PinholeIntrinsics& search, const core::PinholeIntrinsics& capture,
                 const ViewSearchOptions& options, uint64_t seed) {
-  return [&robot, &twin, targets, mount, search, capture, options,
-          seed](const reality::Observation& o) {
-    std::array<double, 7> q;
-    for (int i = 0; i < 7; ++i) q[i] = o.q[i];
-    const TargetView view = TargetVisibility(twin, q, o.gripper_width, targets);
-    core::Rng rng(seed);
-    const ViewChoice choice = ChooseView(view.mesh, search, mount, view.score, rng, options);
-    spdlog::debug("active look: azimuth {:.2f}, elevation {:.2f}, targets fill {:.1f}%",
-                  choice.azimuth, choice.elevation, choice.score);
-    return std::vector<reality::RgbdFrame>{
-        robot.Capture({OrbitPose(mount, choice.azimuth, choice.elevation), capture})};
-  };
+  return
+      [&robot, &twin, targets, mount, search, capture, options, seed](const LookContext& context) {
+        const reality::Observation& o = context.observation;
+        std::array<double, 7> q;
+        for (int i = 0; i < 7; ++i) q[i] = o.q[i];
+        // The twin as the actor believes the scene is; what it holds is not looked for.
+        const mjModel* m = twin.model();
+        for (const auto& [name, pose] : context.objects) {
+          const int b = mj_name2id(m, mjOBJ_BODY, name.c_str());
+          if (b >= 0 && m->body_jntnum[b] > 0 && m->jnt_type[m->body_jntadr[b]] == mjJNT_FREE)
+            twin.PlaceBody(b, pose);
+        }
+        std::vector<std::string> wanted;
+        for (const auto& t : targets)
+          if (t != context.held) wanted.push_back(t);
+        const TargetView view = TargetVisibility(twin, q, o.gripper_width, wanted);
+        core::Rng rng(seed);
+        const ViewChoice choice = ChooseView(view.mesh, search, mount, view.score, rng, options);
+        spdlog::debug("active look: azimuth {:.2f}, elevation {:.2f}, targets fill {:.1f}%",
+                      choice.azimuth, choice.elevation, choice.score);
+        return std::vector<reality::RgbdFrame>{
+            robot.Capture({OrbitPose(mount, choice.azimuth, choice.elevation), capture})};
+      };
 }
 
 }  // namespace twinforge::samrl

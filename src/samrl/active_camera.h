@@ -86,9 +86,10 @@ ViewChoice ChooseView(const real2sim::RasterMesh& scene, const core::PinholeIntr
 // few of the arm's points the frame is registered by), all round but behind the robot.
 OrbitMount ObjectsMount(const sim::Task& twin);
 
-// SAM-RL's active look: at each trial the view that shows `targets` best in the twin (posed at
-// the robot's joints; ChooseView on TargetVisibility, searched at `search` intrinsics), then one
-// frame from there with the robot's movable camera at `capture` intrinsics.
+// SAM-RL's active look: at each look the view that shows `targets` best in the twin (posed at
+// the robot's joints, the objects where the actor believes them; what it holds is no target;
+// ChooseView on TargetVisibility, searched at `search` intrinsics), then one frame from there with
+// the robot's movable camera at `capture` intrinsics.
 Look ActiveLook(reality::Robot& robot, real2sim::TwinGeometry& twin,
                 const std::vector<std::string>& targets, const OrbitMount& mount,
                 const core::PinholeIntrinsics& search, const core::PinholeIntrinsics& capture,

@@ -87,12 +87,21 @@ const core::Pose& ObjectPoseEstimator::nominal(int i) const { return models_.at(
 
 std::vector<Eigen::Vector3d> ObjectPoseEstimator::Foreground(
     const std::vector<Eigen::Vector3d>& frame_points, const sim::ArmVector& q, double gripper_width,
-    core::Pose* correction) {
+    core::Pose* correction, int held, const core::Pose& held_pose) {
   env_.PoseRobot(q, 0.5 * gripper_width, 0);
   const mjModel* m = env_.model();
+  if (held >= int(models_.size()))
+    throw core::Error("pose estimate: held body " + std::to_string(held) + " of " +
+                      std::to_string(models_.size()));
+  // The held object stands where the gripper has it for this frame, and back where the twin has
+  // it after.
+  if (held >= 0) env_.PlaceBody(models_[held]->id, held_pose);
   const real2sim::Mesh background = real2sim::PosedGeoms(m, env_.data(), env_.base(), [&](int g) {
-    return Visible(m, g) && !std::binary_search(object_geoms_.begin(), object_geoms_.end(), g);
+    return Visible(m, g) &&
+           (!std::binary_search(object_geoms_.begin(), object_geoms_.end(), g) ||
+            (held >= 0 && sim::InSubtree(m, m->geom_bodyid[g], models_[held]->id)));
   });
+  if (held >= 0) env_.PlaceBody(models_[held]->id, models_[held]->nominal);
   core::Pose moved = core::Pose::Identity();
   if (options_.register_reach > 0)
     moved = real2sim::AlignToSurface(
@@ -227,13 +236,23 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model,
 }
 
 std::vector<ObjectPose> ObjectPoseEstimator::Estimate(
-    const std::vector<Eigen::Vector3d>& foreground) const {
+    const std::vector<Eigen::Vector3d>& foreground, const std::vector<bool>& skip) const {
+  if (!skip.empty() && skip.size() != models_.size())
+    throw core::Error("pose estimate: " + std::to_string(skip.size()) + " skip flags for " +
+                      std::to_string(models_.size()) + " bodies");
   std::vector<ObjectPose> out(models_.size());
   std::vector<bool> done(models_.size(), false);
+  for (std::size_t i = 0; i < skip.size(); ++i)
+    if (skip[i]) {
+      done[i] = true;
+      out[i].body = models_[i]->body;
+      out[i].pose = models_[i]->nominal;
+    }
   std::vector<Eigen::Vector3d> points = foreground;
   for (std::size_t round = 0; round < models_.size(); ++round) {
     // Every remaining object fitted to the remaining points; the best explained one is kept and
     // takes its points.
+    if (std::all_of(done.begin(), done.end(), [](bool d) { return d; })) break;
     int pick = -1;
     ObjectPose picked;
     for (std::size_t i = 0; i < models_.size(); ++i) {

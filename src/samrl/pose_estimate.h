@@ -86,13 +86,17 @@ class ObjectPoseEstimator {
   // The points of a frame the twin's fixed geometry does not explain, inside the task's
   // workspace, the arm at `q` with the fingers `gripper_width` apart (the arm is in the frame
   // too); the frame registered to that geometry first, if the options say so (`correction`: the
-  // rigid motion applied to the points).
+  // rigid motion applied to the points). `held`: one of the bodies (an index into them) that the
+  // gripper holds, at `held_pose`: its points count as the arm's (-1: none).
   std::vector<Eigen::Vector3d> Foreground(const std::vector<Eigen::Vector3d>& points,
                                           const sim::ArmVector& q, double gripper_width,
-                                          core::Pose* correction = nullptr);
+                                          core::Pose* correction = nullptr, int held = -1,
+                                          const core::Pose& held_pose = core::Pose::Identity());
 
-  // Every body's pose from foreground points, in the order the bodies were given.
-  std::vector<ObjectPose> Estimate(const std::vector<Eigen::Vector3d>& foreground) const;
+  // Every body's pose from foreground points, in the order the bodies were given; a body whose
+  // `skip` entry is true is not fitted (reported unseen, at the twin's own pose).
+  std::vector<ObjectPose> Estimate(const std::vector<Eigen::Vector3d>& foreground,
+                                   const std::vector<bool>& skip = {}) const;
 
   // The twin's own pose of body i.
   const core::Pose& nominal(int i) const;

@@ -8,7 +8,7 @@ namespace twinforge::samrl {
 
 Look FixedLook(reality::Robot& robot, const core::Pose& pose,
                const sim::CameraIntrinsics& intrinsics) {
-  return [&robot, pose, intrinsics](const reality::Observation&) {
+  return [&robot, pose, intrinsics](const LookContext&) {
     return std::vector<reality::RgbdFrame>{robot.Capture({pose, intrinsics})};
   };
 }
@@ -25,7 +25,7 @@ sim::CameraIntrinsics ScaleIntrinsics(sim::CameraIntrinsics k, int scale) {
 
 TwinActor::TwinActor(std::shared_ptr<const sim::Task> twin, reality::Robot& robot, Look look,
                      bool oracle, const PoseEstimateOptions& options,
-                     const core::Pose& camera_correction)
+                     const core::Pose& camera_correction, const RelookOptions& relook)
     : task_(twin),
       robot_(robot),
       look_(std::move(look)),
@@ -33,7 +33,8 @@ TwinActor::TwinActor(std::shared_ptr<const sim::Task> twin, reality::Robot& robo
       camera_correction_(camera_correction),
       env_(twin),
       expert_(*twin),
-      estimator_(twin, twin->spec().objects, options) {
+      estimator_(twin, twin->spec().objects, options),
+      relook_(relook) {
   for (const auto& name : twin->spec().objects)
     bodies_.push_back(mj_name2id(env_.model(), mjOBJ_BODY, name.c_str()));
 }
@@ -43,43 +44,79 @@ void TwinActor::Begin(uint64_t seed) {
   expert_.Reset();
   env_.Reset(0, 0);
   estimates_.clear();
-  looked_ = false;
+  looks_ = 0;
+  redone_ = 0;
   closure_ = 0;
   carried_ = -1;
 }
 
+double TwinActor::LookAndEstimate(const reality::Observation& o) {
+  const auto& names = task_->spec().objects;
+  LookContext context{o, {}, carried_ >= 0 ? names[carried_] : ""};
+  for (std::size_t i = 0; i < bodies_.size(); ++i)
+    context.objects.emplace_back(names[i], env_.BodyPose(bodies_[i]));
+  const core::Pose held = carried_ >= 0 ? env_.BodyPose(bodies_[carried_]) : core::Pose{};
+  std::vector<Eigen::Vector3d> points;
+  for (const reality::RgbdFrame& frame : look_(context)) {
+    const auto p = estimator_.Foreground(FramePoints(frame, camera_correction_), o.q,
+                                         o.gripper_width, nullptr, carried_, held);
+    points.insert(points.end(), p.begin(), p.end());
+  }
+  std::vector<bool> skip(bodies_.size(), false);
+  if (carried_ >= 0) skip[carried_] = true;
+  const std::vector<ObjectPose> found = estimator_.Estimate(points, skip);
+  ++looks_;
+  const bool first = estimates_.empty();
+  if (first) estimates_ = found;
+  // After the first look, an object is moved only when it was seen farther than the estimate's
+  // own scatter from where it was believed to be.
+  double moved = 0;
+  for (std::size_t i = 0; i < bodies_.size(); ++i) {
+    if (skip[i]) continue;
+    const double d = (found[i].pose.translation - estimates_[i].pose.translation).head<2>().norm();
+    if (!first && (!found[i].seen || d < relook_.moved)) continue;
+    moved = std::max(moved, d);
+    estimates_[i] = found[i];
+    env_.PlaceBody(bodies_[i], found[i].pose);
+    spdlog::debug("twin actor, look {}: {} {} at ({:.3f}, {:.3f}), {} points explained, {} not",
+                  looks_, found[i].body, found[i].seen ? "seen" : "NOT seen",
+                  found[i].pose.translation.x(), found[i].pose.translation.y(), found[i].inliers,
+                  found[i].outliers);
+  }
+  return moved;
+}
+
 reality::OperatorInput TwinActor::Next(const reality::Observation& o) {
   reality::OperatorInput input;
-  if (oracle_ && looked_ && robot_.QuerySuccess() == reality::SuccessAnswer::kSuccess) {
+  if (oracle_ && looks_ > 0 && robot_.QuerySuccess() == reality::SuccessAnswer::kSuccess) {
     input.kind = reality::OperatorInput::Kind::kDone;
     return input;
   }
   env_.PoseRobot(o.q, 0.5 * o.gripper_width, closure_);
-  if (!looked_) {
-    looked_ = true;
-    std::vector<Eigen::Vector3d> points;
-    for (const reality::RgbdFrame& frame : look_(o)) {
-      const auto p =
-          estimator_.Foreground(FramePoints(frame, camera_correction_), o.q, o.gripper_width);
-      points.insert(points.end(), p.begin(), p.end());
-    }
-    estimates_ = estimator_.Estimate(points);
-    for (std::size_t i = 0; i < bodies_.size(); ++i) {
-      env_.PlaceBody(bodies_[i], estimates_[i].pose);
-      spdlog::debug("twin actor: {} {} at ({:.3f}, {:.3f}), {} points explained, {} not",
-                    estimates_[i].body, estimates_[i].seen ? "seen" : "NOT seen",
-                    estimates_[i].pose.translation.x(), estimates_[i].pose.translation.y(),
-                    estimates_[i].inliers, estimates_[i].outliers);
-    }
-  }
   const core::Pose tool = env_.EePose();
   if (carried_ >= 0) env_.PlaceBody(bodies_[carried_], tool * carried_in_tool_);
+  if (looks_ == 0) LookAndEstimate(o);
   if (expert_.finished()) {
     input.kind = reality::OperatorInput::Kind::kDone;
     return input;
   }
   input.kind = reality::OperatorInput::Kind::kAction;
+  const int step = expert_.current_step();
   input.action = expert_.Act(env_, rng_);
+  // A step marked `look` just done: look again, and do it again if something moved under it.
+  const auto& steps = task_->spec().expert.steps;
+  for (int s = step; s < expert_.current_step() && looks_ < relook_.max_looks; ++s) {
+    if (!steps[s].look) continue;
+    const double moved = LookAndEstimate(o);
+    if (moved >= relook_.moved) {
+      spdlog::info("twin actor: look {} found an object {:.0f} mm from where it was; step {} again",
+                   looks_, 1e3 * moved, s);
+      ++redone_;
+      expert_.Restart(s);
+      input.action = expert_.Act(env_, rng_);
+    }
+    break;
+  }
   const double closure = input.action.mode == sim::ActionMode::kContinuous
                              ? double(input.action.value[6] > 0)
                          : input.action.index == 13 ? 1.0

@@ -4,9 +4,12 @@
 // the scene's own (a robot has no privileged state).
 //
 // At a trial's first step the actor looks (a callback returns the frames: the fixed camera's, or
-// a frame from a view it chose) and estimates every object's pose once. Afterwards the arm follows
+// a frame from a view it chose) and estimates every object's pose. Afterwards the arm follows
 // the robot's joints; an object the gripper closes on is carried with the tool from then on, as it
-// sat in the hand when the fingers closed.
+// sat in the hand when the fingers closed. When an expert step marked `look` is done, the actor
+// looks again (where to look is the callback's choice: it is told what the actor believes and
+// holds) and re-estimates the objects it does not hold; one found moved (pushed, knocked) is put
+// where it is now and the step is done again. Sensing is part of acting, as in SAM-RL.
 #pragma once
 
 #include <functional>
@@ -23,8 +26,30 @@
 
 namespace twinforge::samrl {
 
-// The frames to estimate the objects from, given the robot's first observation.
-using Look = std::function<std::vector<reality::RgbdFrame>(const reality::Observation&)>;
+// What the actor knows when it looks: the robot's observation, where it believes each object is
+// (robot base frame; at a trial's first look, where the twin has them) and what it holds.
+struct LookContext {
+  const reality::Observation& observation;
+  std::vector<std::pair<std::string, core::Pose>> objects;
+  std::string held;  // "" when the gripper holds nothing
+};
+
+// The frames to estimate the objects from.
+using Look = std::function<std::vector<reality::RgbdFrame>(const LookContext&)>;
+
+// When the actor looks again (the task's expert steps marked `look`).
+struct RelookOptions {
+  int max_looks = 3;     // per trial, the first look included (1: never again)
+  double moved = 0.005;  // m, in the table's plane: an object found this far from where it was
+                         // believed has moved; less is the estimate's own scatter, and ignored
+  template <class A>
+  void Serialize(A& a) {
+    a("max_looks", max_looks);
+    a("moved", moved);
+    a.Require(max_looks >= 1, "max_looks", "at least the first look");
+    a.Require(moved > 0, "moved", "a positive distance in m");
+  }
+};
 
 // One frame from a fixed pose (camera, OpenCV axes -> robot base) with the robot's movable camera.
 Look FixedLook(reality::Robot& robot, const core::Pose& pose,
@@ -38,7 +63,8 @@ class TwinActor : public reality::Operator {
   // `twin`: the twin task (its objects are estimated, its expert acts). `oracle`: ask the robot
   // whether the task is done after each step (the proxy's success oracle) and stop there.
   TwinActor(std::shared_ptr<const sim::Task> twin, reality::Robot& robot, Look look, bool oracle,
-            const PoseEstimateOptions& options = {}, const core::Pose& camera_correction = {});
+            const PoseEstimateOptions& options = {}, const core::Pose& camera_correction = {},
+            const RelookOptions& relook = {});
 
   // Before each trial: the expert starts over and the scene is looked at again.
   void Begin(uint64_t seed);
@@ -46,8 +72,11 @@ class TwinActor : public reality::Operator {
   reality::OperatorInput Next(const reality::Observation& o) override;
   std::string name() const override { return "twin actor"; }
 
-  // This trial's estimate (empty before its first step).
+  // This trial's estimate (empty before its first step), updated by every later look.
   const std::vector<ObjectPose>& estimates() const { return estimates_; }
+  // This trial's looks, and the looks after which a step was done again (something had moved).
+  int looks() const { return looks_; }
+  int redone_steps() const { return redone_; }
   // The twin as the actor last saw it.
   const sim::Env& twin() const { return env_; }
 
@@ -62,8 +91,13 @@ class TwinActor : public reality::Operator {
   ObjectPoseEstimator estimator_;
   std::vector<int> bodies_;
   std::vector<ObjectPose> estimates_;
+  // Looks at the scene; re-estimates every object but the carried one. Returns the largest
+  // distance (table plane) an object seen was found from where it was believed.
+  double LookAndEstimate(const reality::Observation& o);
+
+  RelookOptions relook_;
   core::Rng rng_{0};
-  bool looked_ = false;
+  int looks_ = 0, redone_ = 0;
   double closure_ = 0;
   int carried_ = -1;  // index into bodies_
   core::Pose carried_in_tool_;

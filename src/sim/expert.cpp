@@ -3,6 +3,8 @@
 #include <array>
 #include <cmath>
 
+#include "core/error.h"
+
 namespace twinforge::sim {
 
 namespace {
@@ -72,6 +74,15 @@ void ScriptedExpert::Reset() {
   step_ = 0;
   steps_in_step_ = 0;
   last_move_ = -1;
+}
+
+void ScriptedExpert::Restart(int step) {
+  if (step < 0 || step >= static_cast<int>(task_.spec().expert.steps.size()))
+    throw core::Error(task_.spec().name + ": the expert has no step " + std::to_string(step));
+  step_ = step;
+  steps_in_step_ = 0;
+  last_move_ = -1;
+  at_grid_target_ = false;
 }
 
 void ScriptedExpert::Advance() {

@@ -18,6 +18,9 @@ class ScriptedExpert {
 
   // Starts the script from its first step.
   void Reset();
+  // Goes back to the start of step `step` (a step done again: the scene changed under it).
+  // Throws core::Error for a step the script does not have.
+  void Restart(int step);
   // The next action for the env's current state.
   Action Act(const Env& env, core::Rng& rng);
   // Whether every step of the script has been done.

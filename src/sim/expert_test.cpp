@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include "core/error.h"
+
 namespace twinforge::sim {
 namespace {
 
@@ -37,6 +39,50 @@ TEST(RefiningMove, ClosesSubGridErrors) {
     EXPECT_LT((tool.translation - goal.translation).norm(), 0.004) << offset.transpose();
     EXPECT_LT(core::AngleBetween(tool.rotation, goal.rotation), 0.05) << offset.transpose();
   }
+}
+
+// A step done again because the scene changed under it (a robot's twin actor looked from over
+// the hole and found the block pushed): the expert comes over the hole where the block is now and
+// inserts the peg. Going straight on down from where the hole was does not.
+TEST(ScriptedExpert, RestartDoesAStepAgainWhereTheSceneIsNow) {
+  auto task = std::make_shared<const Task>(LoadTaskSpec("peg_insertion"));
+  const int over_hole = 4;  // "tip over the hole", the step the task marks `look`
+  ASSERT_TRUE(task->spec().expert.steps[over_hole].look);
+  const int block = mj_name2id(task->model(), mjOBJ_BODY, "hole_block");
+  const auto run = [&](int64_t episode, bool restart) {
+    Env env(task);
+    ScriptedExpert expert(*task);
+    core::Rng rng = BeginExpertEpisode(env, expert, 7, episode, 1);
+    bool pushed = false;
+    for (int t = 0; t < task->spec().horizon; ++t) {
+      const int step = expert.current_step();
+      Action action = expert.Act(env, rng);
+      if (!pushed && step == over_hole && expert.current_step() > over_hole) {
+        pushed = true;
+        core::Pose pose = env.BodyPose(block);
+        pose.translation.x() += 0.03;
+        env.PlaceBody(block, pose);
+        if (restart) {
+          expert.Restart(over_hole);
+          EXPECT_EQ(expert.current_step(), over_hole);
+          action = expert.Act(env, rng);
+        }
+      }
+      const StepResult r = env.Step(action);
+      if (r.success) return pushed;
+      if (r.done) break;
+    }
+    return false;
+  };
+  int again = 0, straight_on = 0;
+  for (int64_t episode = 0; episode < 6; ++episode) {
+    again += run(episode, true);
+    straight_on += run(episode, false);
+  }
+  EXPECT_GE(again, 5) << "of 6 with the step done again";
+  EXPECT_LE(straight_on, 1) << "of 6 going straight on down";
+  ScriptedExpert expert(*task);
+  EXPECT_THROW(expert.Restart(int(task->spec().expert.steps.size())), core::Error);
 }
 
 }  // namespace

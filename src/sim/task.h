@@ -192,6 +192,10 @@ struct ExpertStep {
   // move, discrete actions: at the limit of the 3 cm grid, keep going with combined turns and
   // moves (slower; for a grasp that needs a few mm, made where there is room to turn).
   bool refine = false;
+  // move: a robot's twin actor (SAM-RL's base actor, acting on estimated object poses) looks at
+  // the scene again when this step is done; an object it does not hold found moved, it does the
+  // step again toward where the object is now. The sim's expert reads the state and ignores it.
+  bool look = false;
   template <class A>
   void Serialize(A& a) {
     a.Enum("type", type,
@@ -220,6 +224,7 @@ struct ExpertStep {
     a("rotation_tolerance", rotation_tolerance);
     a("max_steps", max_steps);
     a("refine", refine);
+    a("look", look);
     a.Require(type != ExpertStepType::kDrive || !joint.empty(), "joint",
               "a joint name for a drive step");
     a.Require(type != ExpertStepType::kGrip || gripper != GripCommand::kKeep, "gripper",

@@ -40,6 +40,10 @@ class TwinGeometry {
   void RayCast(const std::array<double, 7>& q, double gripper_width, const sim::Camera& camera,
                std::vector<float>* depth, std::vector<int>* geom);
 
+  // Puts a movable body (one with a free joint) at `pose` (robot base frame) for every later
+  // Posed and RayCast. Throws core::Error for a body without a free joint.
+  void PlaceBody(int body, const core::Pose& pose) { env_.PlaceBody(body, pose); }
+
   const mjModel* model() const { return env_.model(); }
 
  private:
