@@ -66,11 +66,17 @@ pipeline::RealityEvalReport EvaluateTwinActor(reality::Robot& robot, const sim::
   samrl::ViewSearchOptions search;
   search.samples = 24;
   search.steps = 30;
+  const core::PinholeIntrinsics search_camera{40, 30, 36, 36, 19.5, 14.5};
+  const samrl::OrbitMount mount = samrl::ObjectsMount(*twin);
   const samrl::Look look =
-      cli.look == "fixed"
-          ? samrl::FixedLook(robot, camera.pose, capture)
-          : samrl::ActiveLook(robot, geometry, task.objects, samrl::ObjectsMount(*twin),
-                              {40, 30, 36, 36, 19.5, 14.5}, capture, search, cli.options.seed);
+      cli.look == "fixed" ? samrl::FixedLook(robot, camera.pose, capture)
+      : cli.look == "best-fixed"
+          ? samrl::FixedLook(robot,
+                             samrl::BestFixedView(geometry, *twin, task.objects, mount,
+                                                  search_camera, search, cli.options.seed),
+                             capture)
+          : samrl::ActiveLook(robot, geometry, task.objects, mount, search_camera, capture, search,
+                              cli.options.seed);
   samrl::PoseEstimateOptions estimate;
   estimate.register_to_robot = cli.register_to == "robot";
   samrl::TwinActor actor(twin, robot, look, robot.Info().has_success_oracle, estimate, {},
@@ -108,9 +114,11 @@ void AddEval(CLI::App& parent, int& exit_code) {
                 "object poses estimated from a frame of the robot's movable camera")
       ->check(CLI::IsMember({"policy", "twin"}));
   c->add_option("--look", cli->look,
-                "twin actor: where its camera looks from: active (the view that shows the objects "
-                "best in the twin) or fixed (the task camera's pose)")
-      ->check(CLI::IsMember({"active", "fixed"}));
+                "twin actor: where its camera looks from: active (at each look, the view that "
+                "shows the objects best in the twin as the actor believes it, arm included), "
+                "best-fixed (one view for every look: the best with the twin as it is and the arm "
+                "at rest) or fixed (the task camera's pose)")
+      ->check(CLI::IsMember({"active", "best-fixed", "fixed"}));
   c->add_option("--register-to", cli->register_to,
                 "twin actor: what the frame is registered to before the objects are fitted: robot "
                 "(the arm, exact) or fixed (all of the twin's fixed geometry: the table, panels)")

@@ -153,6 +153,23 @@ OrbitMount ObjectsMount(const sim::Task& twin) {
   return mount;
 }
 
+core::Pose BestFixedView(real2sim::TwinGeometry& twin, const sim::Task& task,
+                         const std::vector<std::string>& targets, const OrbitMount& mount,
+                         const core::PinholeIntrinsics& search, const ViewSearchOptions& options,
+                         uint64_t seed) {
+  sim::Env env(std::make_shared<const sim::Task>(task.spec()));
+  env.Reset(0, 0);
+  const sim::ArmVector arm = env.ArmPositions();
+  std::array<double, 7> q;
+  for (int i = 0; i < 7; ++i) q[i] = arm[i];
+  const TargetView view = TargetVisibility(twin, q, 2 * env.FingerOpening(), targets);
+  core::Rng rng(seed);
+  const ViewChoice choice = ChooseView(view.mesh, search, mount, view.score, rng, options);
+  spdlog::info("best fixed view: azimuth {:.2f}, elevation {:.2f}, targets fill {:.1f}%",
+               choice.azimuth, choice.elevation, choice.score);
+  return OrbitPose(mount, choice.azimuth, choice.elevation);
+}
+
 Look ActiveLook(reality::Robot& robot, real2sim::TwinGeometry& twin,
                 const std::vector<std::string>& targets, const OrbitMount& mount,
                 const core::PinholeIntrinsics& search, const core::PinholeIntrinsics& capture,

@@ -86,6 +86,14 @@ ViewChoice ChooseView(const real2sim::RasterMesh& scene, const core::PinholeIntr
 // few of the arm's points the frame is registered by), all round but behind the robot.
 OrbitMount ObjectsMount(const sim::Task& twin);
 
+// The best fixed camera the twin can propose, the active look's baseline: the mount's view that
+// shows `targets` best with the scene as the twin has it and the arm at rest (as ActiveLook
+// chooses at a trial's first look, but once, for every look of every trial).
+core::Pose BestFixedView(real2sim::TwinGeometry& twin, const sim::Task& task,
+                         const std::vector<std::string>& targets, const OrbitMount& mount,
+                         const core::PinholeIntrinsics& search,
+                         const ViewSearchOptions& options = {}, uint64_t seed = 1);
+
 // SAM-RL's active look: at each look the view that shows `targets` best in the twin (posed at
 // the robot's joints, the objects where the actor believes them; what it holds is no target;
 // ChooseView on TargetVisibility, searched at `search` intrinsics), then one frame from there with
