@@ -89,6 +89,7 @@ pipeline::RealityEvalReport EvaluateTwinActor(reality::Robot& robot, const sim::
                                  {"look", cli.look},
                                  {"max_looks", cli.relook.max_looks},
                                  {"moved", cli.relook.moved},
+                                 {"max_move", cli.relook.max_move},
                                  {"capture", {capture.width, capture.height}}};
   return pipeline::EvaluateOperatorOnReality(
       robot, {&actor, [&](uint64_t seed) { actor.Begin(seed); }, header}, task, cli.options,
@@ -134,6 +135,10 @@ void AddEval(CLI::App& parent, int& exit_code) {
                 "twin actor: m an object must be found from where it was believed to count as "
                 "moved (smaller shifts are the estimate's own scatter)")
       ->check(CLI::PositiveNumber);
+  c->add_option("--max-move", cli->relook.max_move,
+                "twin actor: m beyond which an object found is taken for a misfit (clutter taken "
+                "for it), not a push, and ignored")
+      ->check(CLI::PositiveNumber);
   c->add_option("--levels", cli->levels, "randomization levels, e.g. 1,2,3")
       ->delimiter(',')
       ->check(CLI::Range(0, 3));
@@ -157,6 +162,10 @@ void AddEval(CLI::App& parent, int& exit_code) {
     if ((cli->actor == "policy") == cli->policy.empty())
       throw core::Error(cli->actor == "policy" ? "eval: --policy FILE is needed (or --actor twin)"
                                                : "eval --actor twin: takes no --policy");
+    if (cli->relook.moved >= cli->relook.max_move)
+      throw core::Error("eval: --moved (" + std::to_string(cli->relook.moved) +
+                        " m) must be less than --max-move (" +
+                        std::to_string(cli->relook.max_move) + " m)");
     if (cli->actor == "twin" && !cli->options.residual.empty())
       throw core::Error("eval --actor twin: no residual for the twin actor yet");
     const sim::TaskSpec task = sim::LoadTaskSpec(cli->task);

@@ -75,6 +75,11 @@ double TwinActor::LookAndEstimate(const reality::Observation& o) {
     if (skip[i]) continue;
     const double d = (found[i].pose.translation - estimates_[i].pose.translation).head<2>().norm();
     if (!first && (!found[i].seen || d < relook_.moved)) continue;
+    if (!first && d > relook_.max_move) {
+      spdlog::info("twin actor: look {} fitted {} {:.0f} mm away, too far for a push; ignored",
+                   looks_, found[i].body, 1e3 * d);
+      continue;
+    }
     moved = std::max(moved, d);
     estimates_[i] = found[i];
     env_.PlaceBody(bodies_[i], found[i].pose);
