@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "core/error.h"
+#include "sim/model.h"
 
 namespace twinforge::samrl {
 
@@ -183,8 +184,7 @@ Look ActiveLook(reality::Robot& robot, real2sim::TwinGeometry& twin,
         const mjModel* m = twin.model();
         for (const auto& [name, pose] : context.objects) {
           const int b = mj_name2id(m, mjOBJ_BODY, name.c_str());
-          if (b >= 0 && m->body_jntnum[b] > 0 && m->jnt_type[m->body_jntadr[b]] == mjJNT_FREE)
-            twin.PlaceBody(b, pose);
+          if (b >= 0 && sim::FreeJointOf(m, b) >= 0) twin.PlaceBody(b, pose);
         }
         std::vector<std::string> wanted;
         for (const auto& t : targets)

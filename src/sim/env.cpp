@@ -5,6 +5,7 @@
 #include <cstring>
 
 #include "core/error.h"
+#include "sim/model.h"
 #include "sim/servo_lag.h"
 
 namespace twinforge::sim {
@@ -14,15 +15,6 @@ namespace {
 template <class T>
 void CopyArray(T* dst, const T* src, int count) {
   std::memcpy(dst, src, sizeof(T) * count);
-}
-
-// The body's free joint, or -1.
-int FreeJointOf(const mjModel* m, int body) {
-  for (int j = 0; j < m->body_jntnum[body]; ++j) {
-    const int id = m->body_jntadr[body] + j;
-    if (m->jnt_type[id] == mjJNT_FREE) return id;
-  }
-  return -1;
 }
 
 }  // namespace

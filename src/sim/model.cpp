@@ -43,6 +43,14 @@ bool InSubtree(const mjModel* m, int body, int root) {
   return false;
 }
 
+int FreeJointOf(const mjModel* m, int body) {
+  for (int j = 0; j < m->body_jntnum[body]; ++j) {
+    const int id = m->body_jntadr[body] + j;
+    if (m->jnt_type[id] == mjJNT_FREE) return id;
+  }
+  return -1;
+}
+
 std::string MujocoVersion() {
   const int v = mj_version();  // e.g. 222
   return std::to_string(v / 100) + "." + std::to_string(v / 10 % 10) + "." + std::to_string(v % 10);
