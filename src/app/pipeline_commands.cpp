@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 
 #include "app/reality_cli.h"
+#include "app/twin_actor_cli.h"
 #include "core/config.h"
 #include "core/error.h"
 #include "core/log.h"
@@ -16,8 +17,6 @@
 #include "pipeline/residual_training.h"
 #include "pipeline/run_directory.h"
 #include "reality/proxy_reality.h"
-#include "samrl/active_camera.h"
-#include "samrl/twin_actor.h"
 #include "sim/task.h"
 
 namespace twinforge::app {
@@ -27,9 +26,8 @@ namespace {
 struct EvalCli {
   RealityCli reality;
   std::string policy, task, out;
-  std::string actor = "policy", look = "active", register_to = "robot";
-  int capture_scale = 8;
-  samrl::RelookOptions relook;
+  std::string actor = "policy";
+  TwinActorCli twin;
   std::vector<int> levels = {1, 2, 3};
   pipeline::RealityEvalOptions options;
   bool grader_state = false;
@@ -49,51 +47,15 @@ bool AskPerson(const pipeline::TrialRecord& t) {
 }
 
 // SAM-RL's twin actor on `robot`: the twin's expert on the objects a frame shows, the frame taken
-// from the view the twin says shows them best (or from the task camera's pose).
+// from the view the twin says shows them best (or from the task camera's pose); with
+// --residual, a residual on its actions.
 pipeline::RealityEvalReport EvaluateTwinActor(reality::Robot& robot, const sim::TaskSpec& task,
                                               const EvalCli& cli,
                                               const pipeline::SuccessJudge& judge,
                                               core::Progress& progress) {
-  if (!robot.Info().can_scan)
-    throw core::Error("eval --actor twin: " + robot.Info().name +
-                      " has no camera it can move (it does not answer capture)");
-  learn::PinMathThreads(1);
-  auto twin = std::make_shared<const sim::Task>(task);
-  const sim::Camera camera = sim::MakeCamera(task.camera);
-  const sim::CameraIntrinsics capture =
-      samrl::ScaleIntrinsics(camera.intrinsics, cli.capture_scale);
-  real2sim::TwinGeometry geometry(task, 600);
-  samrl::ViewSearchOptions search;
-  search.samples = 24;
-  search.steps = 30;
-  const core::PinholeIntrinsics search_camera{40, 30, 36, 36, 19.5, 14.5};
-  const samrl::OrbitMount mount = samrl::ObjectsMount(*twin);
-  const samrl::Look look =
-      cli.look == "fixed" ? samrl::FixedLook(robot, camera.pose, capture)
-      : cli.look == "best-fixed"
-          ? samrl::FixedLook(robot,
-                             samrl::BestFixedView(geometry, *twin, task.objects, mount,
-                                                  search_camera, search, cli.options.seed),
-                             capture)
-          : samrl::ActiveLook(robot, geometry, task.objects, mount, search_camera, capture, search,
-                              cli.options.seed);
-  samrl::PoseEstimateOptions estimate;
-  estimate.register_to_robot = cli.register_to == "robot";
-  samrl::TwinActor actor(twin, robot, look, robot.Info().has_success_oracle, estimate, {},
-                         cli.relook);
-  const nlohmann::json header = {{"actor", "twin"},
-                                 {"twin_hash", pipeline::Fingerprint()
-                                                   .AddFile(task.file)
-                                                   .AddFile(task.file.parent_path() / task.scene)
-                                                   .Hex()},
-                                 {"look", cli.look},
-                                 {"max_looks", cli.relook.max_looks},
-                                 {"moved", cli.relook.moved},
-                                 {"max_move", cli.relook.max_move},
-                                 {"capture", {capture.width, capture.height}}};
-  return pipeline::EvaluateOperatorOnReality(
-      robot, {&actor, [&](uint64_t seed) { actor.Begin(seed); }, header}, task, cli.options,
-      cli.out, judge, &progress);
+  TwinActorOnRobot actor(robot, task, cli.twin, cli.options.seed);
+  return pipeline::EvaluateBaseOnReality(robot, actor.AsResidualBase(), actor.header(), task,
+                                         cli.options, cli.out, judge, &progress);
 }
 
 void AddEval(CLI::App& parent, int& exit_code) {
@@ -114,31 +76,7 @@ void AddEval(CLI::App& parent, int& exit_code) {
                 "policy: the --policy file; twin: SAM-RL's base actor, the twin's expert acting on "
                 "object poses estimated from a frame of the robot's movable camera")
       ->check(CLI::IsMember({"policy", "twin"}));
-  c->add_option("--look", cli->look,
-                "twin actor: where its camera looks from: active (at each look, the view that "
-                "shows the objects best in the twin as the actor believes it, arm included), "
-                "best-fixed (one view for every look: the best with the twin as it is and the arm "
-                "at rest) or fixed (the task camera's pose)")
-      ->check(CLI::IsMember({"active", "best-fixed", "fixed"}));
-  c->add_option("--register-to", cli->register_to,
-                "twin actor: what the frame is registered to before the objects are fitted: robot "
-                "(the arm, exact) or fixed (all of the twin's fixed geometry: the table, panels)")
-      ->check(CLI::IsMember({"robot", "fixed"}));
-  c->add_option("--capture-scale", cli->capture_scale,
-                "twin actor: the frame's resolution, as a multiple of the task camera's")
-      ->check(CLI::Range(1, 16));
-  c->add_option("--max-looks", cli->relook.max_looks,
-                "twin actor: looks per trial at most, the first included; the task's expert steps "
-                "marked look are done again when a look finds an object moved (1: look once)")
-      ->check(CLI::PositiveNumber);
-  c->add_option("--moved", cli->relook.moved,
-                "twin actor: m an object must be found from where it was believed to count as "
-                "moved (smaller shifts are the estimate's own scatter)")
-      ->check(CLI::PositiveNumber);
-  c->add_option("--max-move", cli->relook.max_move,
-                "twin actor: m beyond which an object found is taken for a misfit (clutter taken "
-                "for it), not a push, and ignored")
-      ->check(CLI::PositiveNumber);
+  cli->twin.Add(c);
   c->add_option("--levels", cli->levels, "randomization levels, e.g. 1,2,3")
       ->delimiter(',')
       ->check(CLI::Range(0, 3));
@@ -146,7 +84,7 @@ void AddEval(CLI::App& parent, int& exit_code) {
   c->add_option("--seed", cli->options.seed, "trial seeds (the same for every policy compared)");
   c->add_flag("--sample", cli->options.sample, "sample the policy's moves (default: most likely)");
   c->add_option("--residual", cli->options.residual,
-                "residual on the policy's actions (train residual)")
+                "residual on the policy's (or the twin actor's) actions (train residual)")
       ->check(CLI::ExistingFile);
   c->add_option("--out", cli->out,
                 "trial log (JSON lines; an existing log of the same policy is resumed)")
@@ -162,12 +100,7 @@ void AddEval(CLI::App& parent, int& exit_code) {
     if ((cli->actor == "policy") == cli->policy.empty())
       throw core::Error(cli->actor == "policy" ? "eval: --policy FILE is needed (or --actor twin)"
                                                : "eval --actor twin: takes no --policy");
-    if (cli->relook.moved >= cli->relook.max_move)
-      throw core::Error("eval: --moved (" + std::to_string(cli->relook.moved) +
-                        " m) must be less than --max-move (" +
-                        std::to_string(cli->relook.max_move) + " m)");
-    if (cli->actor == "twin" && !cli->options.residual.empty())
-      throw core::Error("eval --actor twin: no residual for the twin actor yet");
+    cli->twin.Check("eval");
     const sim::TaskSpec task = sim::LoadTaskSpec(cli->task);
     const std::string proxy = "proxy:";
     std::unique_ptr<reality::ProxyReality> world;
@@ -196,7 +129,7 @@ void AddEval(CLI::App& parent, int& exit_code) {
     nlohmann::json report = pipeline::ToJson(r);
     if (cli->actor == "twin") {
       report["actor"] = "twin";
-      report["look"] = cli->look;
+      report["look"] = cli->twin.look;
     } else {
       report["policy"] = cli->policy;
     }
@@ -278,6 +211,8 @@ void AddRun(CLI::App& parent, int& exit_code) {
 struct ResidualCli {
   RealityCli reality;
   std::string policy, task, out;
+  std::string actor = "policy";
+  TwinActorCli twin;
   bool fresh = false, scratch = false;
   pipeline::ResidualTrainOptions options;
 };
@@ -288,14 +223,21 @@ void AddTrainResidual(CLI::App& train, int& exit_code) {
   auto cli = std::make_shared<ResidualCli>();
   auto* c = train.add_subcommand(
       "residual",
-      "SAM-RL's residual on a point-cloud policy, trained on reality with TD3 or SAC from a zero "
-      "start; resumes its checkpoint (JSON report)");
+      "SAM-RL's residual on a point-cloud policy or on the twin actor, trained on reality with TD3 "
+      "or SAC from a zero start; resumes its checkpoint (JSON report)");
   cli->reality.Add(c);
   auto& o = cli->options;
   c->add_option("--policy", cli->policy, "base point-cloud policy (train distill / train bc)")
-      ->required()
       ->check(CLI::ExistingFile);
-  c->add_option("--task", cli->task, "task name or task.yaml")->required();
+  c->add_option(
+       "--task", cli->task,
+       "task name or task.yaml (with --actor twin: the twin's, e.g. RUN/calibrated/task.yaml)")
+      ->required();
+  c->add_option("--actor", cli->actor,
+                "the base: policy (the --policy file) or twin (SAM-RL's twin actor: the twin's "
+                "expert on object poses estimated from the robot's movable camera)")
+      ->check(CLI::IsMember({"policy", "twin"}));
+  cli->twin.Add(c);
   c->add_option("--out", cli->out,
                 "residual file; .curve.csv, .buffer and .state.json go beside it")
       ->required();
@@ -322,16 +264,28 @@ void AddTrainResidual(CLI::App& train, int& exit_code) {
               "no residual: the agent acts alone on the same observations (a baseline)");
   c->add_flag("--fresh", cli->fresh, "discard an existing checkpoint");
   c->callback([cli, &exit_code] {
+    if ((cli->actor == "policy") == cli->policy.empty())
+      throw core::Error(cli->actor == "policy"
+                            ? "train residual: --policy FILE is needed (or --actor twin)"
+                            : "train residual --actor twin: takes no --policy");
+    cli->twin.Check("train residual");
     if (cli->scratch) cli->options.agent.residual = false;
     const sim::TaskSpec task = sim::LoadTaskSpec(cli->task);
     reality::RealityConnection connection(cli->reality.Options());
     core::Progress progress("residual", cli->options.episodes, "episodes");
-    const pipeline::ResidualTrainReport r = pipeline::TrainResidualOnReality(
-        connection.robot(), cli->policy, task, cli->options, cli->out, cli->fresh, &progress);
+    std::unique_ptr<TwinActorOnRobot> twin;
+    if (cli->actor == "twin")
+      twin = std::make_unique<TwinActorOnRobot>(connection.robot(), task, cli->twin,
+                                                cli->options.seed);
+    const pipeline::ResidualTrainReport r =
+        twin ? pipeline::TrainResidualOnReality(connection.robot(), twin->AsResidualBase(), task,
+                                                cli->options, cli->out, cli->fresh, &progress)
+             : pipeline::TrainResidualOnReality(connection.robot(), cli->policy, task,
+                                                cli->options, cli->out, cli->fresh, &progress);
     progress.Finish();
     std::cout << nlohmann::json{{"residual", r.residual},
                                 {"curve_csv", r.curve_csv},
-                                {"policy", cli->policy},
+                                {"base", twin ? "twin actor" : cli->policy},
                                 {"task", task.name},
                                 {"reality", connection.address()},
                                 {"episodes", r.episodes},

@@ -2,7 +2,6 @@
 
 #include "core/error.h"
 #include "learn/bc.h"
-#include "learn/residual.h"
 #include "sim/env.h"
 
 namespace twinforge::pipeline {
@@ -24,7 +23,6 @@ PolicyOperator::PolicyOperator(reality::Robot& robot, learn::PolicyNet& net,
                                bool sample, bool oracle)
     : robot_(robot),
       net_(net),
-      limits_(task.control.limits),
       oracle_(oracle),
       cloud_(sim::LoadRobotSpec(reality::RobotDescriptionPath(robot.Info().robot)), task.workspace,
              {scene_points, arm_points}, sim::CorrectionPose(task.camera.correction)),
@@ -37,24 +35,6 @@ PolicyOperator::PolicyOperator(reality::Robot& robot, learn::PolicyNet& net,
 }
 
 void PolicyOperator::Begin(uint64_t seed) { rng_ = core::Rng(seed, 0xe7a1); }
-
-void PolicyOperator::SetResidual(learn::OffPolicyAgent* residual,
-                                 const reality::ActionClient* client, bool explore) {
-  if (residual && residual->obs_dim() != net_->HeadInputDim())
-    throw core::Error("the residual reads " + std::to_string(residual->obs_dim()) +
-                      " features, the policy gives " + std::to_string(net_->HeadInputDim()) +
-                      ": it was trained on another base policy");
-  if (residual && residual->action_dim() != sim::kContinuousActionDim)
-    throw core::Error("the residual acts in " + std::to_string(residual->action_dim()) +
-                      " dimensions, not the 7 of an end-effector action");
-  if (residual && !client) throw core::Error("a residual needs the action client's gripper latch");
-  residual_ = residual;
-  client_ = client;
-  explore_ = explore;
-  obs_.resize(net_->HeadInputDim());
-  base_.resize(sim::kContinuousActionDim);
-  action_.resize(sim::kContinuousActionDim);
-}
 
 reality::OperatorInput PolicyOperator::Next(const reality::Observation& o) {
   reality::OperatorInput in;
@@ -69,16 +49,19 @@ reality::OperatorInput PolicyOperator::Next(const reality::Observation& o) {
                       sampling_, false, rng_, points_.data_ptr<float>());
   sim::MakeProprio(o.ee, 0.5 * o.gripper_width, 0.5 * o.gripper_width, proprio_.data_ptr<float>());
   in.kind = reality::OperatorInput::Kind::kAction;
-  // The encoder runs once: the residual reads the same features the head does.
+  // The encoder runs once: a residual reads the same features the head does.
   const torch::Tensor features = net_->HeadInput(points_, proprio_).contiguous();
   in.action = learn::ChooseAction(net_, net_->Head(features), choose_, rng_);
-  if (!residual_) return in;
-  std::copy_n(features.data_ptr<float>(), obs_.size(), obs_.data());
-  learn::ToUnitAction(in.action, limits_, client_->gripper(), base_.data());
-  residual_->Act(obs_.data(), base_.data(), explore_, rng_, action_.data());
-  in.action = learn::FromUnitAction(action_.data(), limits_);
-  if (on_decision) on_decision({obs_.data(), base_.data(), action_.data()});
+  features_.assign(features.data_ptr<float>(), features.data_ptr<float>() + features.numel());
   return in;
+}
+
+ResidualBase PolicyResidualBase(PolicyOperator& op, const std::string& policy_hash) {
+  return {&op,
+          [&op](uint64_t seed) { op.Begin(seed); },
+          op.feature_dim(),
+          [&op](float* out) { std::copy(op.features().begin(), op.features().end(), out); },
+          nlohmann::json{{"policy_hash", policy_hash}}};
 }
 
 }  // namespace twinforge::pipeline

@@ -65,26 +65,31 @@ RealityEvalReport EvaluateOnReality(reality::Robot& robot, const std::filesystem
   if (options.trials <= 0 || options.levels.empty())
     throw core::ConfigError("eval", "trials", "at least one trial at one level");
   learn::PolicyNet net = LoadRobotPolicy(policy, task);
-  const reality::RobotInfo info = robot.Info();
-  nlohmann::json header = {{"policy", policy.string()},
-                           {"policy_hash", Fingerprint().AddFile(policy).Hex()},
-                           {"sample", options.sample},
-                           {"points", {options.scene_points, options.arm_points}}};
-  std::unique_ptr<learn::OffPolicyAgent> residual;
-  if (!options.residual.empty()) {
-    residual = learn::OffPolicyAgent::Open(options.residual);
-    const std::string trained_on = residual->info().value("base_policy_hash", "");
-    if (!trained_on.empty() && trained_on != header["policy_hash"])
-      throw core::Error(options.residual.string() + ": a residual trained on another policy (" +
-                        residual->info().value("base_policy", std::string("?")) + "), not " +
-                        policy.string());
-    header["residual"] = options.residual.string();
-    header["residual_hash"] = Fingerprint().AddFile(options.residual).Hex();
-  }
-  reality::ActionClient client(robot, task.control.limits);
+  const std::string hash = Fingerprint().AddFile(policy).Hex();
+  const nlohmann::json header = {{"policy", policy.string()},
+                                 {"policy_hash", hash},
+                                 {"sample", options.sample},
+                                 {"points", {options.scene_points, options.arm_points}}};
   PolicyOperator op(robot, net, task, options.scene_points, options.arm_points, options.sample,
-                    info.has_success_oracle);
-  op.SetResidual(residual.get(), &client, false);
+                    robot.Info().has_success_oracle);
+  return EvaluateBaseOnReality(robot, PolicyResidualBase(op, hash), header, task, options, log,
+                               judge, progress);
+}
+
+RealityEvalReport EvaluateBaseOnReality(reality::Robot& robot, const ResidualBase& base,
+                                        nlohmann::json header, const sim::TaskSpec& task,
+                                        const RealityEvalOptions& options,
+                                        const std::filesystem::path& log,
+                                        const SuccessJudge& judge, core::Progress* progress) {
+  reality::ActionClient client(robot, task.control.limits);
+  if (options.residual.empty())
+    return EvaluateOperatorOnReality(robot, {base.op, base.begin, header, &client}, task, options,
+                                     log, judge, progress);
+  const auto residual = learn::OffPolicyAgent::Open(options.residual);
+  CheckResidualFits(*residual, base, options.residual.string());
+  header["residual"] = options.residual.string();
+  header["residual_hash"] = Fingerprint().AddFile(options.residual).Hex();
+  ResidualOperator op(base, *residual, client, task.control.limits, false);
   return EvaluateOperatorOnReality(robot,
                                    {&op, [&](uint64_t seed) { op.Begin(seed); }, header, &client},
                                    task, options, log, judge, progress);

@@ -88,6 +88,16 @@ RealityEvalReport EvaluateOnReality(reality::Robot& robot, const std::filesystem
                                     const SuccessJudge& judge = nullptr,
                                     core::Progress* progress = nullptr);
 
+// The same trials for any base a residual can sit on (a point-cloud policy, the twin actor), with
+// options.residual on its actions when set; `header` names the base in the log.
+struct ResidualBase;
+RealityEvalReport EvaluateBaseOnReality(reality::Robot& robot, const ResidualBase& base,
+                                        nlohmann::json header, const sim::TaskSpec& task,
+                                        const RealityEvalOptions& options,
+                                        const std::filesystem::path& log,
+                                        const SuccessJudge& judge = nullptr,
+                                        core::Progress* progress = nullptr);
+
 // What the trials run when it is not a point-cloud policy (SAM-RL's twin actor): an operator at
 // the robot's controls, begun before each trial with the trial's seed, and the log header that
 // names it. A log is resumed when its header names the same thing: every key compared, except

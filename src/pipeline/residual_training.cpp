@@ -13,6 +13,7 @@
 #include "learn/policy_net.h"
 #include "learn/residual.h"
 #include "pipeline/policy_operator.h"
+#include "pipeline/residual_operator.h"
 #include "pipeline/run_directory.h"
 #include "sim/env.h"
 
@@ -71,7 +72,7 @@ class EpisodeRecorder {
     pending_ = false;
     steps_ = 0;
   }
-  void Decide(const PolicyOperator::Decision& d) {
+  void Decide(const ResidualOperator::Decision& d) {
     if (pending_) {
       buffer_.Add(obs_.data(), base_.data(), action_.data(), 0.0f, d.obs, d.base, false);
       ++recorded_;
@@ -108,8 +109,20 @@ ResidualTrainReport TrainResidualOnReality(reality::Robot& robot,
                                            const ResidualTrainOptions& options,
                                            const std::filesystem::path& out, bool fresh,
                                            core::Progress* progress) {
-  const auto start = core::Clock::now();
   learn::PolicyNet net = LoadRobotPolicy(base_policy, task);
+  PolicyOperator op(robot, net, task, options.scene_points, options.arm_points, options.sample,
+                    true);
+  return TrainResidualOnReality(robot,
+                                PolicyResidualBase(op, Fingerprint().AddFile(base_policy).Hex()),
+                                task, options, out, fresh, progress);
+}
+
+ResidualTrainReport TrainResidualOnReality(reality::Robot& robot, const ResidualBase& base,
+                                           const sim::TaskSpec& task,
+                                           const ResidualTrainOptions& options,
+                                           const std::filesystem::path& out, bool fresh,
+                                           core::Progress* progress) {
+  const auto start = core::Clock::now();
   const reality::RobotInfo info = robot.Info();
   if (!info.has_success_oracle)
     throw core::Error(info.name +
@@ -119,16 +132,15 @@ ResidualTrainReport TrainResidualOnReality(reality::Robot& robot,
   report.residual = out;
   report.curve_csv = Beside(out, ".curve.csv");
   const auto buffer_path = Beside(out, ".buffer"), state_path = Beside(out, ".state.json");
-  const int obs_dim = PolicyOperator::ResidualObsDim(net);
+  const int obs_dim = base.feature_dim;
   learn::OffPolicyAgent agent(obs_dim, sim::kContinuousActionDim, options.agent);
-  const std::string base_hash = Fingerprint().AddFile(base_policy).Hex();
   learn::ReplayBuffer buffer(obs_dim, sim::kContinuousActionDim,
                              int64_t(options.episodes) * task.horizon + 1);
   core::Rng update_rng(options.seed, 0x7e5d);
   // What a resumed run must share with the one it continues: all but the episode budget.
   nlohmann::json same_options = core::ToJson(options);
   same_options.erase("episodes");
-  const nlohmann::json fingerprint = {{"base_policy_hash", base_hash},
+  const nlohmann::json fingerprint = {{"base", base.identity},
                                       {"task", task.name},
                                       {"robot", info.name},
                                       {"options", same_options}};
@@ -143,7 +155,7 @@ ResidualTrainReport TrainResidualOnReality(reality::Robot& robot,
         nlohmann::json::parse(core::ReadTextFile(state_path), nullptr, false);
     if (state.is_discarded() || state.value("fingerprint", nlohmann::json()) != fingerprint)
       throw core::Error(state_path.string() +
-                        ": a residual run of another base policy, task, robot or options; pass "
+                        ": a residual run of another base, task, robot or options; pass "
                         "--fresh to start over or give another --out");
     first = state.at("episodes").get<int>();
     if (first > options.episodes)
@@ -166,14 +178,11 @@ ResidualTrainReport TrainResidualOnReality(reality::Robot& robot,
   std::ofstream curve(report.curve_csv, std::ios::app);
   if (!curve) throw core::IoError("cannot write " + report.curve_csv.string());
 
-  agent.info()["base_policy"] = base_policy.string();
-  agent.info()["base_policy_hash"] = base_hash;
+  agent.info()["base"] = base.identity;
   reality::ActionClient client(robot, task.control.limits);
-  PolicyOperator op(robot, net, task, options.scene_points, options.arm_points, options.sample,
-                    true);
-  op.SetResidual(&agent, &client, true);
+  ResidualOperator op(base, agent, client, task.control.limits, true);
   EpisodeRecorder recorder(buffer, obs_dim);
-  op.on_decision = [&](const PolicyOperator::Decision& d) { recorder.Decide(d); };
+  op.on_decision = [&](const ResidualOperator::Decision& d) { recorder.Decide(d); };
   if (progress) progress->Set(first);
 
   for (int e = first; e < options.episodes; ++e) {

@@ -1,5 +1,5 @@
 // SAM-RL's last step: a residual policy trained on reality (the proxy reality, or a robot whose
-// oracle tells success) on top of a point-cloud base policy. The residual starts at zero (the
+// oracle tells success) on top of a base actor (a point-cloud policy, or the twin actor). The residual starts at zero (the
 // robot first runs the base policy unchanged), its critics train alone over the first episodes,
 // then actor and critics together, with TD3 or SAC on the sparse success reward. Without residual
 // mode the same loop trains TD3 or SAC from scratch on the same observations, as baselines.
@@ -70,8 +70,16 @@ struct ResidualTrainReport {
   double seconds = 0;
 };
 
-// Trains the residual on `base_policy` (a point-cloud policy) and writes it to `out`, with
-// `out`.buffer, `out`.state.json and `out`.curve.csv beside it. `fresh` discards a checkpoint.
+// Trains the residual on `base` and writes it to `out`, with `out`.buffer, `out`.state.json and
+// `out`.curve.csv beside it. `fresh` discards a checkpoint. The base is begun with each episode's
+// seed; it should say "done" when the robot's oracle reports success.
+struct ResidualBase;
+ResidualTrainReport TrainResidualOnReality(reality::Robot& robot, const ResidualBase& base,
+                                           const sim::TaskSpec& task,
+                                           const ResidualTrainOptions& options,
+                                           const std::filesystem::path& out, bool fresh,
+                                           core::Progress* progress = nullptr);
+// The same on `base_policy`, a point-cloud policy file (options' points and sampling apply).
 ResidualTrainReport TrainResidualOnReality(reality::Robot& robot,
                                            const std::filesystem::path& base_policy,
                                            const sim::TaskSpec& task,

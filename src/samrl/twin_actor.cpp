@@ -39,6 +39,23 @@ TwinActor::TwinActor(std::shared_ptr<const sim::Task> twin, reality::Robot& robo
     bodies_.push_back(mj_name2id(env_.model(), mjOBJ_BODY, name.c_str()));
 }
 
+int TwinActor::feature_dim() const {
+  return env_.state_dim() + int(task_->spec().expert.steps.size());
+}
+
+void TwinActor::RecordFeatures() {
+  features_.assign(feature_dim(), 0.0f);
+  env_.State(features_.data());
+  // Both in the robot's base frame; the proprioception starts with the tool's position.
+  for (std::size_t i = 0; i < bodies_.size(); ++i)
+    for (int k = 0; k < 3; ++k) {
+      float& x = features_[sim::kProprioDim + 7 * i + k];
+      x = float(10 * (x - features_[k]));
+    }
+  const int steps = int(task_->spec().expert.steps.size());
+  features_[env_.state_dim() + std::min(expert_.current_step(), steps - 1)] = 1.0f;
+}
+
 void TwinActor::Begin(uint64_t seed) {
   rng_ = core::Rng(seed, 0x7a1);
   expert_.Reset();
@@ -147,6 +164,7 @@ reality::OperatorInput TwinActor::Next(const reality::Observation& o) {
     carried_ = -1;
   }
   closure_ = closure;
+  RecordFeatures();
   return input;
 }
 

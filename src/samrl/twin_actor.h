@@ -85,6 +85,12 @@ class TwinActor : public reality::Operator {
   // The twin as the actor last saw it.
   const sim::Env& twin() const { return env_; }
 
+  // What the actor read to choose its last action, for a residual on it (SAM-RL's residual reads
+  // the base's own inputs): the twin's privileged state as the actor believes it (Env::State), with
+  // each object's position taken from the tool's and in dm, then the expert's step, one-hot.
+  int feature_dim() const;
+  const std::vector<float>& features() const { return features_; }
+
  private:
   std::shared_ptr<const sim::Task> task_;
   reality::Robot& robot_;
@@ -103,6 +109,8 @@ class TwinActor : public reality::Operator {
   RelookOptions relook_;
   core::Rng rng_{0};
   int looks_ = 0, redone_ = 0;
+  std::vector<float> features_;
+  void RecordFeatures();
   double closure_ = 0;
   int carried_ = -1;  // index into bodies_
   core::Pose carried_in_tool_;

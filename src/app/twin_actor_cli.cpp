@@ -1,0 +1,98 @@
+#include "app/twin_actor_cli.h"
+
+#include "core/error.h"
+#include "learn/torch_runtime.h"
+#include "pipeline/run_directory.h"
+#include "samrl/active_camera.h"
+#include "sim/camera.h"
+
+namespace twinforge::app {
+
+void TwinActorCli::Add(CLI::App* c) {
+  c->add_option("--look", look,
+                "twin actor: where its camera looks from: active (at each look, the view that "
+                "shows the objects best in the twin as the actor believes it, arm included), "
+                "best-fixed (one view for every look: the best with the twin as it is and the arm "
+                "at rest) or fixed (the task camera's pose)")
+      ->check(CLI::IsMember({"active", "best-fixed", "fixed"}));
+  c->add_option("--register-to", register_to,
+                "twin actor: what the frame is registered to before the objects are fitted: robot "
+                "(the arm, exact) or fixed (all of the twin's fixed geometry: the table, panels)")
+      ->check(CLI::IsMember({"robot", "fixed"}));
+  c->add_option("--capture-scale", capture_scale,
+                "twin actor: the frame's resolution, as a multiple of the task camera's")
+      ->check(CLI::Range(1, 16));
+  c->add_option("--max-looks", relook.max_looks,
+                "twin actor: looks per trial at most, the first included; the task's expert steps "
+                "marked look are done again when a look finds an object moved (1: look once)")
+      ->check(CLI::PositiveNumber);
+  c->add_option("--moved", relook.moved,
+                "twin actor: m an object must be found from where it was believed to count as "
+                "moved (smaller shifts are the estimate's own scatter)")
+      ->check(CLI::PositiveNumber);
+  c->add_option("--max-move", relook.max_move,
+                "twin actor: m beyond which an object found is taken for a misfit (clutter taken "
+                "for it), not a push, and ignored")
+      ->check(CLI::PositiveNumber);
+}
+
+void TwinActorCli::Check(const std::string& command) const {
+  if (relook.moved >= relook.max_move)
+    throw core::Error(command + ": --moved (" + std::to_string(relook.moved) +
+                      " m) must be less than --max-move (" + std::to_string(relook.max_move) +
+                      " m)");
+}
+
+TwinActorOnRobot::TwinActorOnRobot(reality::Robot& robot, const sim::TaskSpec& task,
+                                   const TwinActorCli& cli, uint64_t seed)
+    : twin_(std::make_shared<const sim::Task>(task)) {
+  if (!robot.Info().can_scan)
+    throw core::Error("the twin actor: " + robot.Info().name +
+                      " has no camera it can move (it does not answer capture)");
+  learn::PinMathThreads(1);
+  const sim::Camera camera = sim::MakeCamera(task.camera);
+  const sim::CameraIntrinsics capture = samrl::ScaleIntrinsics(camera.intrinsics, cli.capture_scale);
+  geometry_ = std::make_unique<real2sim::TwinGeometry>(task, 600);
+  samrl::ViewSearchOptions search;
+  search.samples = 24;
+  search.steps = 30;
+  const core::PinholeIntrinsics search_camera{40, 30, 36, 36, 19.5, 14.5};
+  const samrl::OrbitMount mount = samrl::ObjectsMount(*twin_);
+  look_ = cli.look == "fixed" ? samrl::FixedLook(robot, camera.pose, capture)
+          : cli.look == "best-fixed"
+              ? samrl::FixedLook(robot,
+                                 samrl::BestFixedView(*geometry_, *twin_, task.objects, mount,
+                                                      search_camera, search, seed),
+                                 capture)
+              : samrl::ActiveLook(robot, *geometry_, task.objects, mount, search_camera, capture,
+                                  search, seed);
+  samrl::PoseEstimateOptions estimate;
+  estimate.register_to_robot = cli.register_to == "robot";
+  actor_ = std::make_unique<samrl::TwinActor>(twin_, robot, look_,
+                                              robot.Info().has_success_oracle, estimate,
+                                              core::Pose{}, cli.relook);
+  identity_ = {{"actor", "twin"},
+               {"twin_hash", pipeline::Fingerprint()
+                                 .AddFile(task.file)
+                                 .AddFile(task.file.parent_path() / task.scene)
+                                 .Hex()}};
+  header_ = identity_;
+  header_["look"] = cli.look;
+  header_["max_looks"] = cli.relook.max_looks;
+  header_["moved"] = cli.relook.moved;
+  header_["max_move"] = cli.relook.max_move;
+  header_["capture"] = {capture.width, capture.height};
+}
+
+pipeline::ResidualBase TwinActorOnRobot::AsResidualBase() {
+  samrl::TwinActor* actor = actor_.get();
+  return {actor, [actor](uint64_t seed) { actor->Begin(seed); }, actor->feature_dim(),
+          [actor](float* out) {
+            std::copy(actor->features().begin(), actor->features().end(), out);
+          },
+          identity_};
+}
+
+nlohmann::json TwinActorOnRobot::header() const { return header_; }
+
+}  // namespace twinforge::app

@@ -1,0 +1,51 @@
+// SAM-RL's twin actor as the commands set it up (eval --actor twin, train residual --actor twin):
+// its options, and the actor on a robot with everything it looks with.
+//
+// Includes <torch/torch.h> (via pipeline/residual_operator.h): include it from app's .cpp only.
+#pragma once
+
+#include <CLI/CLI.hpp>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "pipeline/residual_operator.h"
+#include "real2sim/calibrate/twin_geometry.h"
+#include "samrl/twin_actor.h"
+#include "sim/task.h"
+
+namespace twinforge::app {
+
+struct TwinActorCli {
+  std::string look = "active", register_to = "robot";
+  int capture_scale = 8;
+  samrl::RelookOptions relook;
+
+  // --look, --register-to, --capture-scale, --max-looks, --moved, --max-move.
+  void Add(CLI::App* command);
+  // Throws when the options disagree (`command` names who asked).
+  void Check(const std::string& command) const;
+};
+
+// The twin actor at `robot`'s controls, on the twin `task`. It says "done" when the robot's
+// oracle (if it has one) reports success. `seed` makes the view search repeatable.
+class TwinActorOnRobot {
+ public:
+  TwinActorOnRobot(reality::Robot& robot, const sim::TaskSpec& task, const TwinActorCli& cli,
+                   uint64_t seed);
+
+  samrl::TwinActor& actor() { return *actor_; }
+  // The actor as a residual's base: the twin (by content) is its identity.
+  pipeline::ResidualBase AsResidualBase();
+  // The identity and the looking protocol, for a trial log's header.
+  nlohmann::json header() const;
+
+ private:
+  std::shared_ptr<const sim::Task> twin_;
+  std::unique_ptr<real2sim::TwinGeometry> geometry_;
+  samrl::Look look_;
+  std::unique_ptr<samrl::TwinActor> actor_;
+  nlohmann::json identity_, header_;
+};
+
+}  // namespace twinforge::app
