@@ -73,8 +73,10 @@ std::filesystem::path WriteTargetDemos(const std::string& name, bool discrete, i
 BcOptions FastOptions() {
   BcOptions o;
   o.sampling.n = 64;
-  o.max_epochs = 60;
-  o.patience = 60;
+  // Long enough to converge on any machine: on an AVX-512 one the held-out accuracy was still
+  // climbing at epoch 60 (0.68) and peaked at epoch 72 (0.94); early stopping ends it there.
+  o.max_epochs = 120;
+  o.patience = 30;
   o.batch = 32;
   return o;
 }
