@@ -280,8 +280,8 @@ void AddTrainResidual(CLI::App& train, int& exit_code) {
     const pipeline::ResidualTrainReport r =
         twin ? pipeline::TrainResidualOnReality(connection.robot(), twin->AsResidualBase(), task,
                                                 cli->options, cli->out, cli->fresh, &progress)
-             : pipeline::TrainResidualOnReality(connection.robot(), cli->policy, task,
-                                                cli->options, cli->out, cli->fresh, &progress);
+             : pipeline::TrainResidualOnReality(connection.robot(), cli->policy, task, cli->options,
+                                                cli->out, cli->fresh, &progress);
     progress.Finish();
     std::cout << nlohmann::json{{"residual", r.residual},
                                 {"curve_csv", r.curve_csv},

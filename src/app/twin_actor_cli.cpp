@@ -51,7 +51,8 @@ TwinActorOnRobot::TwinActorOnRobot(reality::Robot& robot, const sim::TaskSpec& t
                       " has no camera it can move (it does not answer capture)");
   learn::PinMathThreads(1);
   const sim::Camera camera = sim::MakeCamera(task.camera);
-  const sim::CameraIntrinsics capture = samrl::ScaleIntrinsics(camera.intrinsics, cli.capture_scale);
+  const sim::CameraIntrinsics capture =
+      samrl::ScaleIntrinsics(camera.intrinsics, cli.capture_scale);
   geometry_ = std::make_unique<real2sim::TwinGeometry>(task, 600);
   samrl::ViewSearchOptions search;
   search.samples = 24;
@@ -68,9 +69,8 @@ TwinActorOnRobot::TwinActorOnRobot(reality::Robot& robot, const sim::TaskSpec& t
                                   search, seed);
   samrl::PoseEstimateOptions estimate;
   estimate.register_to_robot = cli.register_to == "robot";
-  actor_ = std::make_unique<samrl::TwinActor>(twin_, robot, look_,
-                                              robot.Info().has_success_oracle, estimate,
-                                              core::Pose{}, cli.relook);
+  actor_ = std::make_unique<samrl::TwinActor>(twin_, robot, look_, robot.Info().has_success_oracle,
+                                              estimate, core::Pose{}, cli.relook);
   identity_ = {{"actor", "twin"},
                {"twin_hash", pipeline::Fingerprint()
                                  .AddFile(task.file)
@@ -86,11 +86,10 @@ TwinActorOnRobot::TwinActorOnRobot(reality::Robot& robot, const sim::TaskSpec& t
 
 pipeline::ResidualBase TwinActorOnRobot::AsResidualBase() {
   samrl::TwinActor* actor = actor_.get();
-  return {actor, [actor](uint64_t seed) { actor->Begin(seed); }, actor->feature_dim(),
-          [actor](float* out) {
-            std::copy(actor->features().begin(), actor->features().end(), out);
-          },
-          identity_};
+  return {
+      actor, [actor](uint64_t seed) { actor->Begin(seed); }, actor->feature_dim(),
+      [actor](float* out) { std::copy(actor->features().begin(), actor->features().end(), out); },
+      identity_};
 }
 
 nlohmann::json TwinActorOnRobot::header() const { return header_; }

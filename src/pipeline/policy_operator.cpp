@@ -57,9 +57,7 @@ reality::OperatorInput PolicyOperator::Next(const reality::Observation& o) {
 }
 
 ResidualBase PolicyResidualBase(PolicyOperator& op, const std::string& policy_hash) {
-  return {&op,
-          [&op](uint64_t seed) { op.Begin(seed); },
-          op.feature_dim(),
+  return {&op, [&op](uint64_t seed) { op.Begin(seed); }, op.feature_dim(),
           [&op](float* out) { std::copy(op.features().begin(), op.features().end(), out); },
           nlohmann::json{{"policy_hash", policy_hash}}};
 }

@@ -79,8 +79,8 @@ RealityEvalReport EvaluateOnReality(reality::Robot& robot, const std::filesystem
 RealityEvalReport EvaluateBaseOnReality(reality::Robot& robot, const ResidualBase& base,
                                         nlohmann::json header, const sim::TaskSpec& task,
                                         const RealityEvalOptions& options,
-                                        const std::filesystem::path& log,
-                                        const SuccessJudge& judge, core::Progress* progress) {
+                                        const std::filesystem::path& log, const SuccessJudge& judge,
+                                        core::Progress* progress) {
   reality::ActionClient client(robot, task.control.limits);
   if (options.residual.empty())
     return EvaluateOperatorOnReality(robot, {base.op, base.begin, header, &client}, task, options,

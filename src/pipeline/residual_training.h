@@ -1,8 +1,9 @@
 // SAM-RL's last step: a residual policy trained on reality (the proxy reality, or a robot whose
-// oracle tells success) on top of a base actor (a point-cloud policy, or the twin actor). The residual starts at zero (the
-// robot first runs the base policy unchanged), its critics train alone over the first episodes,
-// then actor and critics together, with TD3 or SAC on the sparse success reward. Without residual
-// mode the same loop trains TD3 or SAC from scratch on the same observations, as baselines.
+// oracle tells success) on top of a base actor (a point-cloud policy, or the twin actor). The
+// residual starts at zero (the robot first runs the base unchanged), its critics train alone over
+// the first episodes, then actor and critics together, with TD3 or SAC on the sparse success
+// reward. Without residual mode the same loop trains TD3 or SAC from scratch on the same
+// observations, as baselines.
 //
 // Episode e is reset with seed MixSeed(seed, e). After every episode the agent, its replay
 // buffer and the counters are saved beside `out`: a killed run resumes after the last whole

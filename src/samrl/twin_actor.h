@@ -109,8 +109,9 @@ class TwinActor : public reality::Operator {
   RelookOptions relook_;
   core::Rng rng_{0};
   int looks_ = 0, redone_ = 0;
-  std::vector<float> features_;
+  // What the last action was chosen from (features()), kept as it is sent.
   void RecordFeatures();
+  std::vector<float> features_;
   double closure_ = 0;
   int carried_ = -1;  // index into bodies_
   core::Pose carried_in_tool_;
