@@ -26,7 +26,6 @@ namespace {
 struct EvalCli {
   RealityCli reality;
   std::string policy, task, out;
-  std::string actor = "policy";
   TwinActorCli twin;
   std::vector<int> levels = {1, 2, 3};
   pipeline::RealityEvalOptions options;
@@ -72,10 +71,6 @@ void AddEval(CLI::App& parent, int& exit_code) {
        "--task", cli->task,
        "task name or task.yaml (with --actor twin: the twin's, e.g. RUN/calibrated/task.yaml)")
       ->required();
-  c->add_option("--actor", cli->actor,
-                "policy: the --policy file; twin: SAM-RL's base actor, the twin's expert acting on "
-                "object poses estimated from a frame of the robot's movable camera")
-      ->check(CLI::IsMember({"policy", "twin"}));
   cli->twin.Add(c);
   c->add_option("--levels", cli->levels, "randomization levels, e.g. 1,2,3")
       ->delimiter(',')
@@ -97,10 +92,7 @@ void AddEval(CLI::App& parent, int& exit_code) {
                 "gripper width; the hidden state too with --grader-state)");
   c->callback([cli, &exit_code] {
     cli->options.levels = cli->levels;
-    if ((cli->actor == "policy") == cli->policy.empty())
-      throw core::Error(cli->actor == "policy" ? "eval: --policy FILE is needed (or --actor twin)"
-                                               : "eval --actor twin: takes no --policy");
-    cli->twin.Check("eval");
+    cli->twin.Check("eval", cli->policy);
     const sim::TaskSpec task = sim::LoadTaskSpec(cli->task);
     const std::string proxy = "proxy:";
     std::unique_ptr<reality::ProxyReality> world;
@@ -122,12 +114,12 @@ void AddEval(CLI::App& parent, int& exit_code) {
     const pipeline::SuccessJudge judge =
         ::isatty(STDIN_FILENO) ? pipeline::SuccessJudge(AskPerson) : nullptr;
     const pipeline::RealityEvalReport r =
-        cli->actor == "twin" ? EvaluateTwinActor(robot, task, *cli, judge, progress)
-                             : pipeline::EvaluateOnReality(robot, cli->policy, task, cli->options,
-                                                           cli->out, judge, &progress);
+        cli->twin.twin() ? EvaluateTwinActor(robot, task, *cli, judge, progress)
+                         : pipeline::EvaluateOnReality(robot, cli->policy, task, cli->options,
+                                                       cli->out, judge, &progress);
     progress.Finish();
     nlohmann::json report = pipeline::ToJson(r);
-    if (cli->actor == "twin") {
+    if (cli->twin.twin()) {
       report["actor"] = "twin";
       report["look"] = cli->twin.look;
     } else {
@@ -211,7 +203,6 @@ void AddRun(CLI::App& parent, int& exit_code) {
 struct ResidualCli {
   RealityCli reality;
   std::string policy, task, out;
-  std::string actor = "policy";
   TwinActorCli twin;
   bool fresh = false, scratch = false;
   pipeline::ResidualTrainOptions options;
@@ -233,10 +224,6 @@ void AddTrainResidual(CLI::App& train, int& exit_code) {
        "--task", cli->task,
        "task name or task.yaml (with --actor twin: the twin's, e.g. RUN/calibrated/task.yaml)")
       ->required();
-  c->add_option("--actor", cli->actor,
-                "the base: policy (the --policy file) or twin (SAM-RL's twin actor: the twin's "
-                "expert on object poses estimated from the robot's movable camera)")
-      ->check(CLI::IsMember({"policy", "twin"}));
   cli->twin.Add(c);
   c->add_option("--out", cli->out,
                 "residual file; .curve.csv, .buffer and .state.json go beside it")
@@ -264,17 +251,13 @@ void AddTrainResidual(CLI::App& train, int& exit_code) {
               "no residual: the agent acts alone on the same observations (a baseline)");
   c->add_flag("--fresh", cli->fresh, "discard an existing checkpoint");
   c->callback([cli, &exit_code] {
-    if ((cli->actor == "policy") == cli->policy.empty())
-      throw core::Error(cli->actor == "policy"
-                            ? "train residual: --policy FILE is needed (or --actor twin)"
-                            : "train residual --actor twin: takes no --policy");
-    cli->twin.Check("train residual");
+    cli->twin.Check("train residual", cli->policy);
     if (cli->scratch) cli->options.agent.residual = false;
     const sim::TaskSpec task = sim::LoadTaskSpec(cli->task);
     reality::RealityConnection connection(cli->reality.Options());
     core::Progress progress("residual", cli->options.episodes, "episodes");
     std::unique_ptr<TwinActorOnRobot> twin;
-    if (cli->actor == "twin")
+    if (cli->twin.twin())
       twin = std::make_unique<TwinActorOnRobot>(connection.robot(), task, cli->twin,
                                                 cli->options.seed);
     const pipeline::ResidualTrainReport r =

@@ -9,6 +9,11 @@
 namespace twinforge::app {
 
 void TwinActorCli::Add(CLI::App* c) {
+  c->add_option("--actor", actor,
+                "what acts: policy (the --policy file) or twin (SAM-RL's base actor, the twin's "
+                "expert acting on object poses estimated from a frame of the robot's movable "
+                "camera)")
+      ->check(CLI::IsMember({"policy", "twin"}));
   c->add_option("--look", look,
                 "twin actor: where its camera looks from: active (at each look, the view that "
                 "shows the objects best in the twin as the actor believes it, arm included), "
@@ -36,7 +41,10 @@ void TwinActorCli::Add(CLI::App* c) {
       ->check(CLI::PositiveNumber);
 }
 
-void TwinActorCli::Check(const std::string& command) const {
+void TwinActorCli::Check(const std::string& command, const std::string& policy) const {
+  if (twin() != policy.empty())
+    throw core::Error(twin() ? command + " --actor twin: takes no --policy"
+                             : command + ": --policy FILE is needed (or --actor twin)");
   if (relook.moved >= relook.max_move)
     throw core::Error(command + ": --moved (" + std::to_string(relook.moved) +
                       " m) must be less than --max-move (" + std::to_string(relook.max_move) +

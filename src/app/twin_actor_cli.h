@@ -17,14 +17,17 @@
 namespace twinforge::app {
 
 struct TwinActorCli {
+  std::string actor = "policy";  // what acts: a --policy file, or the twin actor
   std::string look = "active", register_to = "robot";
   int capture_scale = 8;
   samrl::RelookOptions relook;
 
-  // --look, --register-to, --capture-scale, --max-looks, --moved, --max-move.
+  // --actor, --look, --register-to, --capture-scale, --max-looks, --moved, --max-move.
   void Add(CLI::App* command);
-  // Throws when the options disagree (`command` names who asked).
-  void Check(const std::string& command) const;
+  // Throws when the options disagree, with each other or with `policy` (the --policy file:
+  // needed by --actor policy, refused by --actor twin); `command` names who asked.
+  void Check(const std::string& command, const std::string& policy) const;
+  bool twin() const { return actor == "twin"; }
 };
 
 // The twin actor at `robot`'s controls, on the twin `task`. It says "done" when the robot's
