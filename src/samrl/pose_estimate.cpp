@@ -4,6 +4,7 @@
 #include <cmath>
 #include <map>
 #include <optional>
+#include <unordered_map>
 
 #include "core/error.h"
 #include "real2sim/mesh.h"
@@ -103,15 +104,23 @@ std::vector<Eigen::Vector3d> ObjectPoseEstimator::Foreground(
   });
   if (held >= 0) env_.PlaceBody(models_[held]->id, models_[held]->nominal);
   core::Pose moved = core::Pose::Identity();
-  if (options_.register_reach > 0)
-    moved = real2sim::AlignToSurface(
-        frame_points,
+  if (options_.register_reach > 0) {
+    const real2sim::Mesh target =
         options_.register_to_robot
             ? real2sim::PosedGeoms(
                   m, env_.data(), env_.base(),
                   [&](int g) { return Visible(m, g) && m->geom_group[g] == sim::kRobotGeomGroup; })
-            : background,
-        options_.register_reach, options_.register_samples, 1);
+            : background;
+    // Only points near the surface can pair with it: the ICP looks up the nearest surface sample
+    // of every point it is given at every iteration, and most of a frame is far from the arm.
+    // The margin beyond the reach is what the ICP may move the points by (a few mm).
+    const std::vector<double> distance = real2sim::SurfaceDistances(frame_points, target);
+    std::vector<Eigen::Vector3d> near_target;
+    for (std::size_t i = 0; i < frame_points.size(); ++i)
+      if (distance[i] <= options_.register_reach + 0.02) near_target.push_back(frame_points[i]);
+    moved = real2sim::AlignToSurface(near_target, target, options_.register_reach,
+                                     options_.register_samples, 1);
+  }
   if (correction) *correction = moved;
   std::vector<Eigen::Vector3d> points;
   points.reserve(frame_points.size());
@@ -144,13 +153,38 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model,
     sum += p;
     ++n;
   }
+  // The points bucketed on the table's plane, so that a pose's neighbourhood is looked for in the
+  // buckets it can reach only: a point within the outline (radius r) and height range (|z| <= h)
+  // of a pose is within sqrt(r^2 + h^2) of its origin, whatever its tilt. The candidates are
+  // sorted, so `near` finds the points of a scan over all of them, in the same order.
+  const auto extent = [&](double margin) {
+    const double h = std::max(std::abs(model.z_min - margin), std::abs(model.z_max + margin));
+    return std::hypot(model.radius + margin, h);
+  };
+  const double bucket = std::max(extent(options_.start_reach), 1e-3);
+  const auto bucket_of = [&](double v) { return int64_t(std::floor(v / bucket)); };
+  std::unordered_map<int64_t, std::vector<int>> buckets;
+  const auto key = [](int64_t x, int64_t y) { return (x << 32) ^ (y & 0xffffffff); };
+  for (std::size_t i = 0; i < points.size(); ++i)
+    buckets[key(bucket_of(points[i].x()), bucket_of(points[i].y()))].push_back(int(i));
+  std::vector<int> candidates;
   // The points near a pose, in the body's frame: within its outline and height, with margin.
   const auto near = [&](const core::Pose& pose, double margin, std::vector<Eigen::Vector3d>& local,
                         std::vector<int>& index) {
     local.clear();
     index.clear();
     const core::Pose inv = pose.Inverse();
-    for (std::size_t i = 0; i < points.size(); ++i) {
+    const double reach = extent(margin);
+    const Eigen::Vector3d& t = pose.translation;
+    candidates.clear();
+    for (int64_t x = bucket_of(t.x() - reach); x <= bucket_of(t.x() + reach); ++x)
+      for (int64_t y = bucket_of(t.y() - reach); y <= bucket_of(t.y() + reach); ++y) {
+        const auto it = buckets.find(key(x, y));
+        if (it != buckets.end())
+          candidates.insert(candidates.end(), it->second.begin(), it->second.end());
+      }
+    std::sort(candidates.begin(), candidates.end());
+    for (const int i : candidates) {
       const Eigen::Vector3d b = inv * points[i];
       if (b.head<2>().norm() > model.radius + margin || b.z() < model.z_min - margin ||
           b.z() > model.z_max + margin)
