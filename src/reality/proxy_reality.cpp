@@ -80,10 +80,28 @@ void ApplyDepthSensor(const DepthSensorSpec& sensor, const mjModel* m, int width
 }
 
 ProxyReality::ProxyReality(const std::filesystem::path& world_dir)
-    : spec_(LoadWorldSpec(world_dir)), noise_rng_(spec_.seed, 0x5e) {
-  sim::TaskSpec task_spec = sim::LoadTaskSpec((world_dir / spec_.task).string());
-  task_ =
-      std::make_shared<const sim::Task>(std::move(task_spec), HiddenRobotPhysics(spec_.controller));
+    : ProxyReality(LoadWorldSpec(world_dir), world_dir) {}
+
+ProxyReality::ProxyReality(const WorldSpec& spec, const std::filesystem::path& world_dir)
+    : ProxyReality(spec, sim::LoadTaskSpec((world_dir / spec.task).string()), true) {}
+
+std::unique_ptr<ProxyReality> ProxyReality::SimulatedTwin(const sim::TaskSpec& twin) {
+  WorldSpec spec;
+  spec.name = "twin:" + twin.name;
+  spec.controller.interpolation = 1;
+  spec.controller.latency = 0;
+  DepthSensorSpec& d = spec.depth;
+  d.sigma0 = d.sigma_z2 = d.quantization = 0;
+  d.edge_dropout = d.dark_dropout = d.shiny_dropout = 0;
+  spec.scan.position_sigma = spec.scan.rotation_sigma = 0;
+  return std::unique_ptr<ProxyReality>(new ProxyReality(std::move(spec), twin, false));
+}
+
+ProxyReality::ProxyReality(WorldSpec spec, sim::TaskSpec task, bool hidden_physics)
+    : spec_(std::move(spec)), noise_rng_(spec_.seed, 0x5e) {
+  task_ = hidden_physics ? std::make_shared<const sim::Task>(std::move(task),
+                                                             HiddenRobotPhysics(spec_.controller))
+                         : std::make_shared<const sim::Task>(std::move(task));
   env_ = std::make_unique<sim::Env>(task_);
   controller_ = std::make_unique<sim::ServoLag>(
       sim::ServoLagSpec{spec_.controller.interpolation, spec_.controller.latency},

@@ -142,6 +142,11 @@ class ProxyReality : public Robot {
   explicit ProxyReality(const std::filesystem::path& world_dir);
   ~ProxyReality() override;
 
+  // A twin run as a robot, for the simulated episodes SAM-RL learns from: the twin task's own
+  // scene, physics and position controller (commands followed at once), an ideal depth sensor
+  // and cameras exactly where they are asked to be. It reads no world file.
+  static std::unique_ptr<ProxyReality> SimulatedTwin(const sim::TaskSpec& twin);
+
   RobotInfo Info() override;
   Observation Observe(bool with_frames) override;
   void SendTargets(const sim::JointTargets& targets) override;
@@ -163,6 +168,10 @@ class ProxyReality : public Robot {
   nlohmann::json GraderState() const;
 
  private:
+  // `hidden_physics`: the world's controller changes the task's arm physics (a world), or the
+  // task's own physics stand (a simulated twin).
+  ProxyReality(WorldSpec spec, sim::TaskSpec task, bool hidden_physics);
+  ProxyReality(const WorldSpec& spec, const std::filesystem::path& world_dir);
   WorldSpec spec_;
   std::shared_ptr<const sim::Task> task_;
   std::unique_ptr<sim::Env> env_;
