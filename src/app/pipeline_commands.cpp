@@ -16,6 +16,7 @@
 #include "pipeline/reality_eval.h"
 #include "pipeline/residual_training.h"
 #include "pipeline/run_directory.h"
+#include "pipeline/sensing_q_training.h"
 #include "reality/proxy_reality.h"
 #include "sim/task.h"
 
@@ -122,6 +123,7 @@ void AddEval(CLI::App& parent, int& exit_code) {
     if (cli->twin.twin()) {
       report["actor"] = "twin";
       report["look"] = cli->twin.look;
+      if (!cli->twin.q.empty()) report["q"] = cli->twin.q;
     } else {
       report["policy"] = cli->policy;
     }
@@ -283,12 +285,64 @@ void AddTrainResidual(CLI::App& train, int& exit_code) {
   });
 }
 
+// `train samrl`: the sensing-aware Q from simulated episodes in the twin (no robot needed).
+void AddTrainSamrl(CLI::App& train, int& exit_code) {
+  struct Cli {
+    std::string task, out;
+    pipeline::SensingQTrainOptions options;
+  };
+  auto cli = std::make_shared<Cli>();
+  auto* c = train.add_subcommand(
+      "samrl",
+      "SAM-RL's sensing-aware Q: the twin actor's simulated episodes in the twin, each looking "
+      "from a random view, and Q(view) fitted to their returns; DIR/q.pt is what eval --actor "
+      "twin --look q --q reads; resumes its episodes (JSON report)");
+  auto& o = cli->options;
+  c->add_option("--task", cli->task, "the twin's task name or task.yaml (e.g. RUN/twin/task.yaml)")
+      ->required();
+  c->add_option("--out", cli->out, "directory for episodes.*.jsonl, q.pt and q.json")->required();
+  c->add_option("--episodes", o.episodes, "simulated episodes, one view each")
+      ->check(CLI::Range(4, 100000));
+  c->add_option("--level", o.level, "the twin's randomization level")->check(CLI::Range(0, 3));
+  c->add_option("--seed", o.seed, "episode seeds (and Q's initial weights)");
+  c->add_option("--workers", o.workers, "threads running episodes (the episodes do not change)")
+      ->check(CLI::Range(1, 64));
+  c->add_option("--capture-scale", o.capture_scale,
+                "the simulated frames' resolution, as a multiple of the task camera's")
+      ->check(CLI::Range(1, 16));
+  c->add_option("--fit-steps", o.fit.steps, "Adam steps fitting Q")->check(CLI::PositiveNumber);
+  c->callback([cli, &exit_code] {
+    const sim::TaskSpec task = sim::LoadTaskSpec(cli->task);
+    learn::PinMathThreads(1);
+    core::Progress progress("samrl", cli->options.episodes, "episodes");
+    const pipeline::SensingQTrainReport r =
+        pipeline::TrainSensingQ(task, cli->options, cli->out, &progress);
+    progress.Finish();
+    std::cout << nlohmann::json{{"q", r.q_file},
+                                {"task", task.name},
+                                {"episodes", r.episodes},
+                                {"successes", r.successes},
+                                {"resumed_episodes", r.resumed},
+                                {"valid_mse", r.fit.valid_loss},
+                                {"valid_mse_of_the_mean", r.fit.valid_baseline},
+                                {"view",
+                                 {{"azimuth", r.chosen.azimuth},
+                                  {"elevation", r.chosen.elevation},
+                                  {"q", r.chosen.score}}},
+                                {"seconds", r.seconds}}
+                     .dump(2)
+              << "\n";
+    exit_code = 0;
+  });
+}
+
 }  // namespace
 
 void AddPipelineCommands(CLI::App& parent, int& exit_code) {
   AddEval(parent, exit_code);
   AddRun(parent, exit_code);
   AddTrainResidual(*parent.get_subcommand("train"), exit_code);
+  AddTrainSamrl(*parent.get_subcommand("train"), exit_code);
 }
 
 }  // namespace twinforge::app

@@ -18,8 +18,11 @@ void TwinActorCli::Add(CLI::App* c) {
                 "twin actor: where its camera looks from: active (at each look, the view that "
                 "shows the objects best in the twin as the actor believes it, arm included), "
                 "best-fixed (one view for every look: the best with the twin as it is and the arm "
-                "at rest) or fixed (the task camera's pose)")
-      ->check(CLI::IsMember({"active", "best-fixed", "fixed"}));
+                "at rest), fixed (the task camera's pose) or q (at each look, the view a "
+                "sensing-aware Q, --q, scores best: SAM-RL's active camera)")
+      ->check(CLI::IsMember({"active", "best-fixed", "fixed", "q"}));
+  c->add_option("--q", q, "twin actor, --look q: the Q file train samrl wrote (DIR/q.pt)")
+      ->check(CLI::ExistingFile);
   c->add_option("--register-to", register_to,
                 "twin actor: what the frame is registered to before the objects are fitted: robot "
                 "(the arm, exact) or fixed (all of the twin's fixed geometry: the table, panels)")
@@ -45,6 +48,9 @@ void TwinActorCli::Check(const std::string& command, const std::string& policy) 
   if (twin() != policy.empty())
     throw core::Error(twin() ? command + " --actor twin: takes no --policy"
                              : command + ": --policy FILE is needed (or --actor twin)");
+  if ((look == "q") != !q.empty())
+    throw core::Error(look == "q" ? command + " --look q: needs --q FILE (train samrl's q.pt)"
+                                  : command + " --q: goes with --look q");
   if (relook.moved >= relook.max_move)
     throw core::Error(command + ": --moved (" + std::to_string(relook.moved) +
                       " m) must be less than --max-move (" + std::to_string(relook.max_move) +
@@ -62,30 +68,31 @@ TwinActorOnRobot::TwinActorOnRobot(reality::Robot& robot, const sim::TaskSpec& t
   const sim::CameraIntrinsics capture =
       samrl::ScaleIntrinsics(camera.intrinsics, cli.capture_scale);
   geometry_ = std::make_unique<real2sim::TwinGeometry>(task, 600);
-  samrl::ViewSearchOptions search;
-  search.samples = 24;
-  search.steps = 30;
-  const core::PinholeIntrinsics search_camera{40, 30, 36, 36, 19.5, 14.5};
+  const samrl::ViewSearchOptions search = samrl::LookSearch();
+  const core::PinholeIntrinsics search_camera = samrl::LookSearchCamera();
   const samrl::OrbitMount mount = samrl::ObjectsMount(*twin_);
-  look_ = cli.look == "fixed" ? samrl::FixedLook(robot, camera.pose, capture)
-          : cli.look == "best-fixed"
-              ? samrl::FixedLook(robot,
-                                 samrl::BestFixedView(*geometry_, *twin_, task.objects, mount,
-                                                      search_camera, search, seed),
-                                 capture)
-              : samrl::ActiveLook(robot, *geometry_, task.objects, mount, search_camera, capture,
-                                  search, seed);
+  if (cli.look == "q") {
+    q_ = pipeline::LoadSensingQ(cli.q, task);
+    look_ = samrl::ActiveLook(robot, *geometry_, task.objects, q_.mount, q_.search, capture, search,
+                              seed, samrl::QScore(q_.net, torch::Tensor()));
+  } else {
+    look_ = cli.look == "fixed" ? samrl::FixedLook(robot, camera.pose, capture)
+            : cli.look == "best-fixed"
+                ? samrl::FixedLook(robot,
+                                   samrl::BestFixedView(*geometry_, *twin_, task.objects, mount,
+                                                        search_camera, search, seed),
+                                   capture)
+                : samrl::ActiveLook(robot, *geometry_, task.objects, mount, search_camera, capture,
+                                    search, seed);
+  }
   samrl::PoseEstimateOptions estimate;
   estimate.register_to_robot = cli.register_to == "robot";
   actor_ = std::make_unique<samrl::TwinActor>(twin_, robot, look_, robot.Info().has_success_oracle,
                                               estimate, core::Pose{}, cli.relook);
-  identity_ = {{"actor", "twin"},
-               {"twin_hash", pipeline::Fingerprint()
-                                 .AddFile(task.file)
-                                 .AddFile(task.file.parent_path() / task.scene)
-                                 .Hex()}};
+  identity_ = {{"actor", "twin"}, {"twin_hash", pipeline::TwinFingerprint(task)}};
   header_ = identity_;
   header_["look"] = cli.look;
+  if (q_.net) header_["q_hash"] = q_.hash;
   header_["max_looks"] = cli.relook.max_looks;
   header_["moved"] = cli.relook.moved;
   header_["max_move"] = cli.relook.max_move;

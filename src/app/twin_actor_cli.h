@@ -10,6 +10,7 @@
 #include <string>
 
 #include "pipeline/residual_operator.h"
+#include "pipeline/sensing_q_training.h"
 #include "real2sim/calibrate/twin_geometry.h"
 #include "samrl/twin_actor.h"
 #include "sim/task.h"
@@ -19,13 +20,15 @@ namespace twinforge::app {
 struct TwinActorCli {
   std::string actor = "policy";  // what acts: a --policy file, or the twin actor
   std::string look = "active", register_to = "robot";
+  std::string q;  // --look q: the sensing-aware Q (train samrl's q.pt)
   int capture_scale = 8;
   samrl::RelookOptions relook;
 
-  // --actor, --look, --register-to, --capture-scale, --max-looks, --moved, --max-move.
+  // --actor, --look, --q, --register-to, --capture-scale, --max-looks, --moved, --max-move.
   void Add(CLI::App* command);
   // Throws when the options disagree, with each other or with `policy` (the --policy file:
-  // needed by --actor policy, refused by --actor twin); `command` names who asked.
+  // needed by --actor policy, refused by --actor twin; --q goes with --look q); `command` names
+  // who asked.
   void Check(const std::string& command, const std::string& policy) const;
   bool twin() const { return actor == "twin"; }
 };
@@ -46,6 +49,7 @@ class TwinActorOnRobot {
  private:
   std::shared_ptr<const sim::Task> twin_;
   std::unique_ptr<real2sim::TwinGeometry> geometry_;
+  pipeline::SensingQModel q_;
   samrl::Look look_;
   std::unique_ptr<samrl::TwinActor> actor_;
   nlohmann::json identity_, header_;

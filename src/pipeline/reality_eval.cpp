@@ -103,6 +103,10 @@ RealityEvalReport EvaluateOperatorOnReality(reality::Robot& robot, const TrialOp
   const auto start = core::Clock::now();
   if (options.trials <= 0 || options.levels.empty())
     throw core::ConfigError("eval", "trials", "at least one trial at one level");
+  if (options.workers < 1 || options.worker < 0 || options.worker >= options.workers)
+    throw core::ConfigError("eval", "worker",
+                            "worker " + std::to_string(options.worker) + " of " +
+                                std::to_string(options.workers) + " (0 <= worker < workers)");
   const reality::RobotInfo info = robot.Info();
   if (!info.has_success_oracle && !judge)
     throw core::Error(info.name + " cannot tell success by itself and no one was asked to judge");
@@ -180,7 +184,7 @@ RealityEvalReport EvaluateOperatorOnReality(reality::Robot& robot, const TrialOp
     bool shown[2] = {false, false};  // a failure's frame, a success's frame
     LevelResult result;
     result.level = level;
-    for (int i = 0; i < options.trials; ++i) {
+    for (int i = options.worker; i < options.trials; i += options.workers) {
       const auto it = done.find({level, i});
       TrialRecord r;
       if (it != done.end()) {
@@ -232,6 +236,7 @@ RealityEvalReport EvaluateOperatorOnReality(reality::Robot& robot, const TrialOp
       ++result.trials;
       result.successes += r.success;
       report.trials.push_back(r);
+      if (options.on_trial) options.on_trial(r);
       if (progress)
         progress->Advance(1, "level " + std::to_string(level) + ": " +
                                  std::to_string(result.successes) + "/" +

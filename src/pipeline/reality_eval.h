@@ -24,6 +24,15 @@
 
 namespace twinforge::pipeline {
 
+struct TrialRecord {
+  int level = 0, trial = 0;
+  uint64_t seed = 0;
+  bool success = false;
+  int steps = 0;  // actions sent
+  double seconds = 0;
+  nlohmann::json grader;  // RealityEvalOptions::grader's answer, if asked
+};
+
 struct RealityEvalOptions {
   std::vector<int> levels = {1, 2, 3};
   int trials = 50;          // per level
@@ -47,15 +56,12 @@ struct RealityEvalOptions {
   // A log of another policy, residual, task or protocol is renamed LOG.previous and a new one
   // started (else it is an error).
   bool set_aside_other_logs = false;
-};
-
-struct TrialRecord {
-  int level = 0, trial = 0;
-  uint64_t seed = 0;
-  bool success = false;
-  int steps = 0;  // actions sent
-  double seconds = 0;
-  nlohmann::json grader;  // RealityEvalOptions::grader's answer, if asked
+  // Only the trials i with i % workers == worker run here (their seeds unchanged): trials split
+  // among threads or processes, each with its own robot and log.
+  int worker = 0, workers = 1;
+  // If set: called after each trial this call counts (run or read back), e.g. for a progress line
+  // shared by workers.
+  std::function<void(const TrialRecord&)> on_trial;
 };
 
 struct LevelResult {

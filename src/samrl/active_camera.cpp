@@ -154,16 +154,30 @@ OrbitMount ObjectsMount(const sim::Task& twin) {
   return mount;
 }
 
-core::Pose BestFixedView(real2sim::TwinGeometry& twin, const sim::Task& task,
-                         const std::vector<std::string>& targets, const OrbitMount& mount,
-                         const core::PinholeIntrinsics& search, const ViewSearchOptions& options,
-                         uint64_t seed) {
+TargetView TargetVisibilityAtRest(real2sim::TwinGeometry& twin, const sim::Task& task,
+                                  const std::vector<std::string>& targets) {
   sim::Env env(std::make_shared<const sim::Task>(task.spec()));
   env.Reset(0, 0);
   const sim::ArmVector arm = env.ArmPositions();
   std::array<double, 7> q;
   for (int i = 0; i < 7; ++i) q[i] = arm[i];
-  const TargetView view = TargetVisibility(twin, q, 2 * env.FingerOpening(), targets);
+  return TargetVisibility(twin, q, 2 * env.FingerOpening(), targets);
+}
+
+core::PinholeIntrinsics LookSearchCamera() { return {40, 30, 36, 36, 19.5, 14.5}; }
+
+ViewSearchOptions LookSearch() {
+  ViewSearchOptions o;
+  o.samples = 24;
+  o.steps = 30;
+  return o;
+}
+
+core::Pose BestFixedView(real2sim::TwinGeometry& twin, const sim::Task& task,
+                         const std::vector<std::string>& targets, const OrbitMount& mount,
+                         const core::PinholeIntrinsics& search, const ViewSearchOptions& options,
+                         uint64_t seed) {
+  const TargetView view = TargetVisibilityAtRest(twin, task, targets);
   core::Rng rng(seed);
   const ViewChoice choice = ChooseView(view.mesh, search, mount, view.score, rng, options);
   spdlog::info("best fixed view: azimuth {:.2f}, elevation {:.2f}, targets fill {:.1f}%",
@@ -174,29 +188,30 @@ core::Pose BestFixedView(real2sim::TwinGeometry& twin, const sim::Task& task,
 Look ActiveLook(reality::Robot& robot, real2sim::TwinGeometry& twin,
                 const std::vector<std::string>& targets, const OrbitMount& mount,
                 const core::PinholeIntrinsics& search, const core::PinholeIntrinsics& capture,
-                const ViewSearchOptions& options, uint64_t seed) {
-  return
-      [&robot, &twin, targets, mount, search, capture, options, seed](const LookContext& context) {
-        const reality::Observation& o = context.observation;
-        std::array<double, 7> q;
-        for (int i = 0; i < 7; ++i) q[i] = o.q[i];
-        // The twin as the actor believes the scene is; what it holds is not looked for.
-        const mjModel* m = twin.model();
-        for (const auto& [name, pose] : context.objects) {
-          const int b = mj_name2id(m, mjOBJ_BODY, name.c_str());
-          if (b >= 0 && sim::FreeJointOf(m, b) >= 0) twin.PlaceBody(b, pose);
-        }
-        std::vector<std::string> wanted;
-        for (const auto& t : targets)
-          if (t != context.held) wanted.push_back(t);
-        const TargetView view = TargetVisibility(twin, q, o.gripper_width, wanted);
-        core::Rng rng(seed);
-        const ViewChoice choice = ChooseView(view.mesh, search, mount, view.score, rng, options);
-        spdlog::debug("active look: azimuth {:.2f}, elevation {:.2f}, targets fill {:.1f}%",
-                      choice.azimuth, choice.elevation, choice.score);
-        return std::vector<reality::RgbdFrame>{
-            robot.Capture({OrbitPose(mount, choice.azimuth, choice.elevation), capture})};
-      };
+                const ViewSearchOptions& options, uint64_t seed, ViewScore score) {
+  return [&robot, &twin, targets, mount, search, capture, options, seed,
+          score](const LookContext& context) {
+    const reality::Observation& o = context.observation;
+    std::array<double, 7> q;
+    for (int i = 0; i < 7; ++i) q[i] = o.q[i];
+    // The twin as the actor believes the scene is; what it holds is not looked for.
+    const mjModel* m = twin.model();
+    for (const auto& [name, pose] : context.objects) {
+      const int b = mj_name2id(m, mjOBJ_BODY, name.c_str());
+      if (b >= 0 && sim::FreeJointOf(m, b) >= 0) twin.PlaceBody(b, pose);
+    }
+    std::vector<std::string> wanted;
+    for (const auto& t : targets)
+      if (t != context.held) wanted.push_back(t);
+    const TargetView view = TargetVisibility(twin, q, o.gripper_width, wanted);
+    core::Rng rng(seed);
+    const ViewChoice choice =
+        ChooseView(view.mesh, search, mount, score ? score : view.score, rng, options);
+    spdlog::debug("active look: azimuth {:.2f}, elevation {:.2f}, {} {:.2f}", choice.azimuth,
+                  choice.elevation, score ? "Q" : "targets fill (%)", choice.score);
+    return std::vector<reality::RgbdFrame>{
+        robot.Capture({OrbitPose(mount, choice.azimuth, choice.elevation), capture})};
+  };
 }
 
 }  // namespace twinforge::samrl

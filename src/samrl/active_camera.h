@@ -86,6 +86,16 @@ ViewChoice ChooseView(const real2sim::RasterMesh& scene, const core::PinholeIntr
 // few of the arm's points the frame is registered by), all round but behind the robot.
 OrbitMount ObjectsMount(const sim::Task& twin);
 
+// TargetVisibility with the scene as the twin has it (its objects at home) and the arm at rest:
+// what the active look renders at a trial's first look.
+TargetView TargetVisibilityAtRest(real2sim::TwinGeometry& twin, const sim::Task& task,
+                                  const std::vector<std::string>& targets);
+
+// How the twin actor's looks search (ActiveLook, BestFixedView, a Q's view): 40 x 30 views, the
+// best of 24 sampled poses, then 30 ascent steps.
+core::PinholeIntrinsics LookSearchCamera();
+ViewSearchOptions LookSearch();
+
 // The best fixed camera the twin can propose, the active look's baseline: the mount's view that
 // shows `targets` best with the scene as the twin has it and the arm at rest (as ActiveLook
 // chooses at a trial's first look, but once, for every look of every trial).
@@ -97,10 +107,12 @@ core::Pose BestFixedView(real2sim::TwinGeometry& twin, const sim::Task& task,
 // SAM-RL's active look: at each look the view that shows `targets` best in the twin (posed at
 // the robot's joints, the objects where the actor believes them; what it holds is no target;
 // ChooseView on TargetVisibility, searched at `search` intrinsics), then one frame from there with
-// the robot's movable camera at `capture` intrinsics.
+// the robot's movable camera at `capture` intrinsics. With `score` set (a sensing-aware Q,
+// QScore), the view is the one it scores best instead, on the same target-coloured render.
 Look ActiveLook(reality::Robot& robot, real2sim::TwinGeometry& twin,
                 const std::vector<std::string>& targets, const OrbitMount& mount,
                 const core::PinholeIntrinsics& search, const core::PinholeIntrinsics& capture,
-                const ViewSearchOptions& options = {}, uint64_t seed = 1);
+                const ViewSearchOptions& options = {}, uint64_t seed = 1,
+                ViewScore score = nullptr);
 
 }  // namespace twinforge::samrl

@@ -8,7 +8,7 @@
 namespace twinforge::samrl {
 
 torch::Tensor ViewInput(const real2sim::SoftImage& image) {
-  return torch::stack({image.depth, image.silhouette}).to(torch::kFloat32);
+  return torch::stack({image.depth, image.silhouette, image.rgb.select(2, 0)}).to(torch::kFloat32);
 }
 
 SensingQNetImpl::SensingQNetImpl(int height, int width, int action_dim, int hidden)
@@ -16,13 +16,14 @@ SensingQNetImpl::SensingQNetImpl(int height, int width, int action_dim, int hidd
   if (height < 8 || width < 8 || action_dim < 0)
     throw core::Error("sensing Q: views of at least 8 x 8 pixels and a non-negative action size");
   conv_ = register_module(
-      "conv", torch::nn::Sequential(
-                  torch::nn::Conv2d(torch::nn::Conv2dOptions(2, 16, 5).stride(2).padding(2)),
-                  torch::nn::ReLU(),
-                  torch::nn::Conv2d(torch::nn::Conv2dOptions(16, 32, 3).stride(2).padding(1)),
-                  torch::nn::ReLU(),
-                  torch::nn::AdaptiveAvgPool2d(torch::nn::AdaptiveAvgPool2dOptions({4, 4})),
-                  torch::nn::Flatten()));
+      "conv",
+      torch::nn::Sequential(
+          torch::nn::Conv2d(torch::nn::Conv2dOptions(kViewChannels, 16, 5).stride(2).padding(2)),
+          torch::nn::ReLU(),
+          torch::nn::Conv2d(torch::nn::Conv2dOptions(16, 32, 3).stride(2).padding(1)),
+          torch::nn::ReLU(),
+          torch::nn::AdaptiveAvgPool2d(torch::nn::AdaptiveAvgPool2dOptions({4, 4})),
+          torch::nn::Flatten()));
   head_ = register_module(
       "head", torch::nn::Sequential(torch::nn::Linear(32 * 16 + action_dim, hidden),
                                     torch::nn::ReLU(), torch::nn::Linear(hidden, hidden),

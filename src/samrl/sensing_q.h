@@ -1,7 +1,8 @@
 // SAM-RL's sensing-aware Q-function: Q(view, action), the return expected when the actor takes
 // `action` having seen the scene from a camera pose, learned by regressing the returns of
-// simulated episodes on the views they were taken with. The view is the soft rasterizer's depth
-// and silhouette, so Q is differentiable in the camera pose and AscendView can choose the view.
+// simulated episodes on the views they were taken with. The view is the soft rasterizer's depth,
+// silhouette and target mask, so Q is differentiable in the camera pose and AscendView can choose
+// the view.
 //
 // Includes <torch/torch.h>: include it only from .cpp files and tests.
 #pragma once
@@ -18,14 +19,17 @@
 
 namespace twinforge::samrl {
 
-// A view as the network reads it: [2, H, W] float, depth (m, 0 = nothing) and silhouette.
+// A view as the network reads it: [3, H, W] float, depth (m, 0 = nothing), silhouette and the
+// red channel, which TargetVisibility's meshes give the targets (the objects the actor must see)
+// and nothing else.
+constexpr int kViewChannels = 3;
 torch::Tensor ViewInput(const real2sim::SoftImage& image);
 
 // Two strided convolutions over the view, then an MLP with the action: a scalar.
 class SensingQNetImpl : public torch::nn::Module {
  public:
   SensingQNetImpl(int height, int width, int action_dim, int hidden = 128);
-  // views [B, 2, H, W], actions [B, action_dim] -> [B]
+  // views [B, kViewChannels, H, W], actions [B, action_dim] -> [B]
   torch::Tensor forward(const torch::Tensor& views, const torch::Tensor& actions);
   int action_dim() const { return action_dim_; }
 
@@ -38,7 +42,7 @@ TORCH_MODULE(SensingQNet);
 // One simulated episode's record: the view its actor saw, its action (or plan parameters) and
 // its return.
 struct ViewReturn {
-  torch::Tensor view;    // [2, H, W]
+  torch::Tensor view;    // [kViewChannels, H, W]
   torch::Tensor action;  // [action_dim]
   double ret = 0;
 };

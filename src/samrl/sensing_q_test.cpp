@@ -22,8 +22,8 @@ double TrueScore(const real2sim::RasterMesh& scene, const OrbitMount& mount, dou
 }
 
 // Episodes "succeed" as much as their view shows the target. A Q learned from 200 such views
-// (depth and silhouette only) predicts held-out returns, and gradient ascent on it through the
-// renderer, from the best of a few sampled views, finds a view that shows the target.
+// (depth, silhouette and the target's mask) predicts held-out returns, and gradient ascent on it
+// through the renderer, from the best of a few sampled views, finds a view that shows the target.
 TEST(SensingQ, ALearnedQChoosesAViewThatShowsTheTarget) {
   learn::PinMathThreads(1);
   const auto scene = OccludedTarget();

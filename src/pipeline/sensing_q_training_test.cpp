@@ -1,0 +1,71 @@
+#include "pipeline/sensing_q_training.h"
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "core/error.h"
+#include "core/test_support.h"
+#include "learn/torch_runtime.h"
+
+namespace twinforge::pipeline {
+namespace {
+
+nlohmann::json ReadJson(const std::filesystem::path& file) {
+  std::ifstream in(file);
+  return nlohmann::json::parse(in);
+}
+
+// Which of the episodes succeeded, by trial, as q.json lists them.
+std::vector<bool> Outcomes(const std::filesystem::path& dir) {
+  std::vector<bool> outcomes;
+  for (const auto& v : ReadJson(dir / "q.json").at("views")) outcomes.push_back(v.at("success"));
+  return outcomes;
+}
+
+// train samrl's loop, small: 6 simulated episodes of the twin actor on the occluded peg's twin.
+// The episodes and their outcomes do not depend on how many workers run them; a second run reads
+// them all back; the Q loads for this twin and is refused, by name, for another.
+TEST(TrainSensingQ, RunsEpisodesResumesAndLoadsForItsTwinOnly) {
+  learn::PinMathThreads(1);
+  const sim::TaskSpec twin = sim::LoadTaskSpec("peg_insertion_occluded");
+  const std::filesystem::path dir = core::testing::TestDir("sensing_q");
+  SensingQTrainOptions o;
+  o.episodes = 6;
+  o.capture_scale = 2;
+  o.fit.steps = 20;
+  o.workers = 2;
+  const SensingQTrainReport two = TrainSensingQ(twin, o, dir / "two");
+  EXPECT_EQ(two.episodes, 6);
+  EXPECT_EQ(two.resumed, 0);
+  EXPECT_TRUE(std::filesystem::exists(dir / "two" / "episodes.0.jsonl"));
+  EXPECT_TRUE(std::filesystem::exists(dir / "two" / "episodes.1.jsonl"));
+  o.workers = 1;
+  const SensingQTrainReport one = TrainSensingQ(twin, o, dir / "one");
+  EXPECT_EQ(Outcomes(dir / "one"), Outcomes(dir / "two"));
+  EXPECT_EQ(one.successes, two.successes);
+  const nlohmann::json views = ReadJson(dir / "one" / "q.json").at("views");
+  ASSERT_EQ(views.size(), 6u);
+  EXPECT_NE(views[0].at("azimuth"), views[1].at("azimuth")) << "each episode its own view";
+
+  o.workers = 2;
+  const SensingQTrainReport again = TrainSensingQ(twin, o, dir / "two");
+  EXPECT_EQ(again.resumed, 6);
+  EXPECT_EQ(Outcomes(dir / "two"), Outcomes(dir / "one"));
+
+  const SensingQModel q = LoadSensingQ(two.q_file, twin);
+  EXPECT_EQ(q.search.width, 40);
+  EXPECT_EQ(q.mount.radius, samrl::ObjectsMount(sim::Task(twin)).radius);
+  try {
+    LoadSensingQ(two.q_file, sim::LoadTaskSpec("peg_insertion"));
+    ADD_FAILURE() << "a Q of another twin was loaded";
+  } catch (const core::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("another twin"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(LoadSensingQ(dir / "missing.pt", twin), core::Error);
+  std::filesystem::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace twinforge::pipeline
