@@ -32,6 +32,12 @@ function(twinforge_test file)
   target_compile_definitions(${target} PRIVATE
     TWINFORGE_TEST_DATA_DIR="${TWINFORGE_SOURCE_DIR}/tests/fixtures")
   include(GoogleTest)
-  gtest_discover_tests(${target} PROPERTIES LABELS "${module};${ARG_LABELS}"
-    DISCOVERY_TIMEOUT 60)
+  if(ARG_LABELS)
+    # Discovery writes a list property unquoted (LABELS a b: b is read as another property), so
+    # a file with labels of its own has its tests listed from the source at configure time.
+    gtest_add_tests(TARGET ${target} SOURCES ${file} TEST_LIST tests)
+    set_tests_properties(${tests} PROPERTIES LABELS "${module};${ARG_LABELS}")
+  else()
+    gtest_discover_tests(${target} PROPERTIES LABELS "${module}" DISCOVERY_TIMEOUT 60)
+  endif()
 endfunction()
