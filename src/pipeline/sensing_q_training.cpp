@@ -247,6 +247,12 @@ SensingQModel LoadSensingQ(const std::filesystem::path& q_file, const sim::TaskS
   }
   model.net->eval();
   model.hash = Fingerprint().AddFile(q_file).Hex();
+  // q.pt is written first: a run killed before q.json followed leaves the older description.
+  if (meta.value("q_hash", std::string()) != model.hash)
+    throw core::Error("sensing Q: " + meta_file.string() + " describes another " +
+                      q_file.filename().string() +
+                      " (a train samrl run stopped between the two?); "
+                      "run train samrl again on the same directory to rewrite both");
   return model;
 }
 

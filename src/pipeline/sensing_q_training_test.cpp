@@ -64,6 +64,16 @@ TEST(TrainSensingQ, RunsEpisodesResumesAndLoadsForItsTwinOnly) {
     EXPECT_NE(std::string(e.what()).find("another twin"), std::string::npos) << e.what();
   }
   EXPECT_THROW(LoadSensingQ(dir / "missing.pt", twin), core::Error);
+  // A q.json that describes another q.pt (a run killed between writing the two) is refused.
+  nlohmann::json meta = ReadJson(dir / "two" / "q.json");
+  meta["q_hash"] = "0";
+  std::ofstream(dir / "two" / "q.json") << meta.dump();
+  try {
+    LoadSensingQ(two.q_file, twin);
+    ADD_FAILURE() << "a q.json of another q.pt was accepted";
+  } catch (const core::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("describes another"), std::string::npos) << e.what();
+  }
   std::filesystem::remove_all(dir);
 }
 
