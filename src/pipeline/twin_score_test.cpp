@@ -1,4 +1,4 @@
-// End to end on the four proxy worlds: a scan through the robot interface (and, for a world
+// End to end on the proxy worlds: a scan through the robot interface (and, for a world
 // with a joint, a second after the world's operator has opened the part), `twin build` with the
 // task, the grader, and the task's expert in the rebuilt twin.
 #include "pipeline/twin_score.h"
@@ -84,7 +84,8 @@ INSTANTIATE_TEST_SUITE_P(ProxyWorlds, TwinFromScans,
                          ::testing::Values(Case{"open_drawer", "prismatic"},
                                            Case{"open_cabinet", "revolute"},
                                            Case{"mug_on_shelf", ""}, Case{"peg_insertion", ""},
-                                           Case{"peg_insertion_occluded", ""}),
+                                           Case{"peg_insertion_occluded", ""},
+                                           Case{"spatula_flipping", ""}),
                          [](const auto& info) { return std::string(info.param.world); });
 
 }  // namespace

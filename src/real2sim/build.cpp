@@ -85,7 +85,7 @@ nlohmann::json BuildTwin(const std::filesystem::path& scan_dir, const std::files
       spdlog::info("twin: {} moves in {}: {} by {:.3f}, fitness {:.2f}", moving.segment + "_moving",
                    moving.segment, ToString(e.type), e.amount, e.fitness);
     }
-    if (options.task) ApplyRecipe(spec, options.task->twin, out, options.task->file.string());
+    if (options.task) ApplyRecipe(spec, options.task->twin, out, options.task->file);
   }
   SaveTwinSpec(out / "twin.yaml", spec);
   ExportOptions export_options = options.export_options;

@@ -201,8 +201,7 @@ ExportReport ExportMjcf(const TwinSpec& spec, const std::filesystem::path& twin_
       << "    </default>\n  </default>\n  <worldbody>\n"
       << "    <light pos=\"0.4 0 1.5\" dir=\"0 0 -1\" directional=\"true\"/>\n";
   // The table: a slab under the support plane.
-  const Eigen::Vector3d n(spec.support[0], spec.support[1], spec.support[2]);
-  const double top = -spec.support[3] / std::max(1e-9, n.z());
+  const double top = SupportOf(spec).ZAt(Eigen::Vector2d::Zero());
   xml << "    <body name=\"table\" pos=\"" << options.table_centre[0] << " "
       << options.table_centre[1] << " " << top - 0.5 * options.table_thickness << "\">\n"
       << "      <geom name=\"table\" type=\"box\" size=\"" << options.table_half[0] << " "
@@ -222,7 +221,9 @@ ExportReport ExportMjcf(const TwinSpec& spec, const std::filesystem::path& twin_
         p.mass / 12 *
         Eigen::Vector3d(e.y() * e.y() + e.z() * e.z(), e.x() * e.x() + e.z() * e.z(),
                         e.x() * e.x() + e.y() * e.y());
-    xml << pad << "  <inertial pos=\"0 0 0\" mass=\"" << p.mass << "\" diaginertia=\""
+    const Eigen::Vector3d com =
+        p.com ? b.pose.Inverse() * Eigen::Vector3d(p.com->data()) : Eigen::Vector3d::Zero();
+    xml << pad << "  <inertial pos=\"" << Vec(com) << "\" mass=\"" << p.mass << "\" diaginertia=\""
         << Vec(inertia.cwiseMax(1e-6)) << "\"/>\n";
     if (b.joint) {
       const JointSpec& j = *b.joint;

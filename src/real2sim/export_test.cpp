@@ -5,7 +5,9 @@
 
 #include <random>
 
+#include "core/error.h"
 #include "core/test_support.h"
+#include "real2sim/drawing.h"
 #include "real2sim/recipe.h"
 #include "sim/mjcf.h"
 #include "sim/model.h"
@@ -266,6 +268,76 @@ TEST(Export, AFittedCylinderStandsStill) {
   const auto [at, upright] = Settle(m, d, "mug", 1.5);
   EXPECT_GT(upright, std::cos(0.5 * M_PI / 180)) << "tilted";
   EXPECT_LT((at - start).head<2>().norm(), 0.003) << "slid or rolled";
+}
+
+// A spatula the scan shows only the handle of, drawn (recipe shape "drawing") from the task's
+// drawing: the twin has the whole tool and its sites where the real one has them, and with its
+// mass on the steel blade, as drawn, it rests on the blade with the handle up. Spread evenly
+// over its bounds, the same mass tips it onto the handle.
+TEST(Export, ADrawnSpatulaRestsOnItsBlade) {
+  const auto dir = core::testing::TestDir("export", "drawn");
+  const auto task = std::filesystem::path(TWINFORGE_ASSETS_DIR) / "tasks/spatula_flipping/task.yaml";
+  const Drawing drawing = ReadDrawing(task.parent_path() / "scene.xml", "spatula");
+  const core::Pose truth{Eigen::Vector3d(0.4, -0.2, drawing.Depth()), core::Yaw(0.4)};
+  auto handle = open3d::geometry::TriangleMesh::CreateBox(0.12, 0.02, 0.016);
+  handle->Translate(Eigen::Vector3d(-0.12, -0.01, -0.008));
+  handle = handle->SubdivideMidpoint(3);
+  handle->Transform(truth.Matrix());
+  WriteMesh(dir / "meshes/handle.ply", Blurred({handle->vertices_, {}, handle->triangles_}, 0.001, 4));
+  TwinSpec spec;
+  spec.parts.resize(1);
+  spec.parts[0].name = "object_0";
+  spec.parts[0].mesh = "meshes/handle.ply";
+  sim::TwinRecipe recipe;
+  recipe.parts = {FittedPart("spatula", {0.12, 0.02, 0.02}, "drawing", 0)};
+  recipe.parts[0].drawing = "scene.xml";
+  ApplyRecipe(spec, recipe, dir, task);
+  ASSERT_EQ(spec.parts[0].name, "spatula");
+  EXPECT_EQ(spec.parts[0].boxes.size(), 3u);
+  EXPECT_NEAR(spec.parts[0].mass, 0.12, 1e-9);
+  ASSERT_TRUE(spec.parts[0].com.has_value());
+  ASSERT_EQ(spec.sites.size(), 2u);
+  const Eigen::Vector3d tip(spec.sites[1].position.data());
+  EXPECT_EQ(spec.sites[1].name, "blade_tip");
+  EXPECT_LT((tip - truth * drawing.sites[1].at).norm(), 0.004) << "the blade's tip, never seen";
+
+  auto settle = [&](const TwinSpec& twin) {
+    const sim::ModelPtr m = LoadWithRobot(ExportMjcf(twin, dir).scene);
+    const sim::DataPtr d = sim::MakeData(m.get());
+    mj_forward(m.get(), d.get());
+    Settle(m, d, "spatula", 1.0);
+    return d->site_xpos[3 * mj_name2id(m.get(), mjOBJ_SITE, "spatula_grasp") + 2];
+  };
+  EXPECT_GT(settle(spec), 0.04) << "the handle stays 4.5 cm up";
+  TwinSpec even = spec;
+  even.parts[0].com.reset();
+  EXPECT_LT(settle(even), 0.03) << "without the blade's weight it tips onto the handle";
+}
+
+// A part standing on another is carved out of a part the recipe names that has its own segment;
+// anything else is refused, naming the field.
+TEST(Export, APartOnAnotherNeedsACarrierWithItsOwnSegment) {
+  const auto dir = core::testing::TestDir("export", "on");
+  WriteMesh(dir / "meshes/block.ply", Panels({{{0.5, 0, 0}, {0.1, 0.1, 0.05}}}));
+  TwinSpec spec;
+  spec.parts.resize(1);
+  spec.parts[0].name = "object_0";
+  spec.parts[0].mesh = "meshes/block.ply";
+  sim::TwinRecipe recipe;
+  recipe.parts = {FittedPart("griddle", {0.1, 0.1, 0.05}, "box", 1),
+                  FittedPart("pancake", {0.08, 0.08, 0.01}, "cylinder", 0.05)};
+  recipe.parts[1].on = "grill";
+  try {
+    TwinSpec twin = spec;
+    ApplyRecipe(twin, recipe, dir, "spatula.yaml");
+    FAIL() << "no part 'grill'";
+  } catch (const core::ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("twin.parts[1].on"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("grill"), std::string::npos) << e.what();
+  }
+  recipe.parts[1].on = "griddle";
+  EXPECT_THROW(ApplyRecipe(spec, recipe, dir, "spatula.yaml"), core::ConfigError)
+      << "nothing stands on a bare block's top";
 }
 
 }  // namespace

@@ -29,6 +29,10 @@ struct Plane {
   Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
   double offset = 0;
   double Distance(const Eigen::Vector3d& p) const { return normal.dot(p) + offset; }
+  // The z of the plane above (x, y) (a plane that is not vertical).
+  double ZAt(const Eigen::Vector2d& xy) const {
+    return -(offset + normal.x() * xy.x() + normal.y() * xy.y()) / normal.z();
+  }
 };
 
 // The triangles for which keep(triangle index) is true, with only the vertices they use.

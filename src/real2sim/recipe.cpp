@@ -7,6 +7,8 @@
 #include "core/config.h"
 #include "core/error.h"
 #include "core/log.h"
+#include "real2sim/drawing.h"
+#include "real2sim/export.h"
 
 namespace twinforge::real2sim {
 
@@ -207,8 +209,145 @@ void AddMovingPart(TwinSpec& spec, const MovingPart& moving, const ArticulationE
   spec.joints.push_back(j);
 }
 
+namespace {
+
+enum class OnTop : uint8_t { kNo, kStands, kUnder };
+
+// Which triangles of `mesh` stand on its top (a pancake on a griddle): its top is the height
+// (`top`, m above `support`) most of its surface lies at; what is 3 mm or more above it and
+// where a disc of `radius` fits (an opening of the footprint on a 3 mm grid: a lip or a rim
+// narrower than the disc drops out) stands on it. The rest within 3 mm of that footprint is
+// under it: what the scan made of what it hides (a rim, a curtain down from an overhang).
+std::vector<OnTop> StandingOnTop(const Mesh& mesh, const Plane& support, double radius,
+                                 double& top) {
+  const std::vector<Eigen::Vector3d> samples = SampleSurface(mesh, 40000, 13);
+  std::map<long, int> heights;  // 2 mm bins
+  for (const auto& p : samples) ++heights[std::lround(support.Distance(p) / 0.002)];
+  top = 0.002 * std::max_element(heights.begin(), heights.end(), [](const auto& a, const auto& b) {
+                  return a.second < b.second;
+                })->first;
+  const double above = top + 0.003, cell = 0.003;
+  Eigen::Vector2d lo = Eigen::Vector2d::Constant(1e300), hi = -lo;
+  for (const auto& p : samples)
+    if (support.Distance(p) > above) {
+      lo = lo.cwiseMin(p.head<2>());
+      hi = hi.cwiseMax(p.head<2>());
+    }
+  std::vector<OnTop> label(mesh.triangles.size(), OnTop::kNo);
+  if (lo.x() > hi.x()) return label;
+  const int reach = static_cast<int>(std::ceil(radius / cell));
+  lo -= Eigen::Vector2d::Constant((reach + 2) * cell);
+  const int nx = static_cast<int>((hi.x() - lo.x()) / cell) + reach + 3,
+            ny = static_cast<int>((hi.y() - lo.y()) / cell) + reach + 3;
+  auto index = [&](const Eigen::Vector3d& p) {
+    const Eigen::Vector2i c = ((p.head<2>() - lo) / cell).array().floor().cast<int>();
+    return c.x() >= 0 && c.y() >= 0 && c.x() < nx && c.y() < ny ? c.y() * nx + c.x() : -1;
+  };
+  std::vector<uint8_t> seen(std::size_t(nx) * ny, 0);
+  for (const auto& p : samples)
+    if (support.Distance(p) > above && index(p) >= 0) seen[index(p)] = 1;
+  // Morphology with a disc of `r` cells: erode (every cell of the disc set) or dilate (any).
+  auto morph = [&](const std::vector<uint8_t>& in, int r, bool erode) {
+    std::vector<uint8_t> out(in.size(), 0);
+    for (int y = 0; y < ny; ++y)
+      for (int x = 0; x < nx; ++x) {
+        bool all = true, any = false;
+        for (int dy = -r; dy <= r; ++dy)
+          for (int dx = -r; dx <= r; ++dx) {
+            if (dx * dx + dy * dy > r * r) continue;
+            const int xx = x + dx, yy = y + dy;
+            const bool on = xx >= 0 && yy >= 0 && xx < nx && yy < ny && in[yy * nx + xx];
+            all = all && on;
+            any = any || on;
+          }
+        out[y * nx + x] = erode ? all : any;
+      }
+    return out;
+  };
+  // Close the gaps between samples first, then open with the disc.
+  const auto closed = morph(morph(seen, 1, false), 1, true);
+  const auto opened = morph(morph(closed, reach, true), reach, false);
+  const auto footprint = morph(opened, 1, false);
+  for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
+    const auto& tri = mesh.triangles[t];
+    const Eigen::Vector3d c =
+        (mesh.vertices[tri[0]] + mesh.vertices[tri[1]] + mesh.vertices[tri[2]]) / 3.0;
+    const int i = index(c);
+    if (i >= 0 && opened[i] && support.Distance(c) > above)
+      label[t] = OnTop::kStands;
+    else if (i >= 0 && footprint[i])
+      label[t] = OnTop::kUnder;
+  }
+  return label;
+}
+
+// What of `part`'s scanned surface stands 3 mm or more above its fitted box `fit` (a
+// griddle's lip), added to its solids as the boxes that cover it.
+void AddWhatStandsOnTop(PartSpec& part, const UprightBounds& fit,
+                        const std::filesystem::path& twin_dir) {
+  std::vector<Eigen::Vector3d> normals, above, above_normals;
+  const std::vector<Eigen::Vector3d> points =
+      SampleSurface(PartMesh(part, twin_dir), 20000, 17, &normals);
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    const Eigen::Vector3d q = fit.yaw.inverse() * points[i];
+    if (q.z() < fit.hi.z() + 0.003) continue;
+    above.push_back(q);
+    above_normals.push_back(fit.yaw.inverse() * normals[i]);
+  }
+  const double yaw = core::ToRollPitchYaw(fit.yaw).z();
+  for (const AlignedBox& b : CoverWithBoxes(above, above_normals, 0.005, 0.006)) {
+    BoxSpec box;
+    const Eigen::Vector3d centre = fit.yaw * b.centre;
+    box.center = {centre.x(), centre.y(), centre.z()};
+    box.size = {2 * b.half.x(), 2 * b.half.y(), 2 * b.half.z()};
+    box.euler = {0, 0, yaw};
+    box.hidden = true;
+    part.boxes.push_back(box);
+  }
+}
+
+// Part `part` (its scanned segment) becomes `drawing`, posed where the segment shows it: the
+// drawing's surface as its mesh (meshes/<name>_drawing.ply), its solids as what it collides as,
+// its mass (unless `mass` > 0) at its centre of mass; its sites join `sites`.
+void PoseDrawnPart(PartSpec& part, const Drawing& drawing, double mass, const Plane& support,
+                   const std::filesystem::path& twin_dir, std::vector<SiteSpec>& sites) {
+  const DrawingFit fit = PoseDrawing(drawing, PartMesh(part, twin_dir).vertices, support);
+  const double yaw = core::ToRollPitchYaw(fit.pose.rotation).z();
+  spdlog::info(
+      "twin: {} drawn at ({:.3f}, {:.3f}, {:.3f}) m, yaw {:.1f} deg: the scan {:.1f} mm (rms) "
+      "from it, {:.0f}% of what it shows seen",
+      part.name, fit.pose.translation.x(), fit.pose.translation.y(), fit.pose.translation.z(),
+      yaw * 180 / M_PI, 1000 * fit.rms, 100 * fit.coverage);
+  Mesh surface = drawing.Surface();
+  for (auto& v : surface.vertices) v = fit.pose * v;
+  part.mesh = "meshes/" + part.name + "_drawing.ply";
+  WriteMesh(twin_dir / part.mesh, surface);
+  part.cuts.clear();
+  part.boxes.clear();
+  for (const BoxSpec& solid : drawing.solids) {
+    BoxSpec posed = solid;
+    const core::Pose pose = fit.pose * solid.pose();
+    posed.center = {pose.translation.x(), pose.translation.y(), pose.translation.z()};
+    const Eigen::Vector3d rpy = core::ToRollPitchYaw(pose.rotation);
+    posed.euler = {rpy.x(), rpy.y(), rpy.z()};
+    posed.hidden = true;  // the drawing's surface is what is seen
+    part.boxes.push_back(posed);
+  }
+  part.collision = PartSpec::Collision::kSolids;
+  part.mass = mass > 0 ? mass : drawing.mass;
+  const Eigen::Vector3d com = fit.pose * drawing.com;
+  part.com = std::array<double, 3>{com.x(), com.y(), com.z()};
+  for (const auto& site : drawing.sites) {
+    const Eigen::Vector3d at = fit.pose * site.at;
+    sites.push_back({site.name, part.name, {at.x(), at.y(), at.z()}, yaw});
+  }
+}
+
+}  // namespace
+
 void ApplyRecipe(TwinSpec& spec, const sim::TwinRecipe& recipe,
-                 const std::filesystem::path& twin_dir, const std::string& origin) {
+                 const std::filesystem::path& twin_dir, const std::filesystem::path& task_file) {
+  const std::string origin = task_file.string();
   // Parts: nearest size first, among the parts no joint moves.
   struct Candidate {
     std::string name;
@@ -219,8 +358,46 @@ void ApplyRecipe(TwinSpec& spec, const sim::TwinRecipe& recipe,
   for (const auto& p : spec.parts)
     if (!JointOf(spec, p.name))
       candidates.push_back({p.name, UprightSize(PartMesh(p, twin_dir).vertices)});
+  // Parts that stand on another in its segment are carved out of it once it is named.
   std::vector<bool> done(recipe.parts.size(), false);
+  for (std::size_t r = 0; r < recipe.parts.size(); ++r) done[r] = !recipe.parts[r].on.empty();
   std::map<std::string, UprightBounds> fitted;  // parts that collide as fitted solids
+  std::vector<SiteSpec> drawn_sites;             // the sites of drawn parts, posed
+  const Plane support = SupportOf(spec);
+  std::map<std::string, double> tops;  // parts others stand on: their top, m above the table
+  // The recipe's kind, mass and friction and what it collides as, `floor` the z it stands on.
+  auto make = [&](const sim::TwinPartRecipe& want, PartSpec& part, double floor) {
+    part.fixed = want.fixed;
+    if (want.mass > 0) part.mass = want.mass;
+    if (want.friction > 0) part.friction = want.friction;
+    if (want.shape == "drawing") {
+      PoseDrawnPart(part, ReadDrawing(task_file.parent_path() / want.drawing, want.name),
+                    want.mass, support, twin_dir, drawn_sites);
+    } else if (want.shape != "scan") {
+      std::vector<Eigen::Vector3d> points = PartMesh(part, twin_dir).vertices;
+      const auto carrier = tops.find(want.name);
+      if (carrier != tops.end())  // the solid up to its top; what stands on it comes after
+        points.erase(std::remove_if(points.begin(), points.end(),
+                                    [&](const Eigen::Vector3d& p) {
+                                      return support.Distance(p) > carrier->second + 0.003;
+                                    }),
+                     points.end());
+      const bool cylinder = want.shape == "cylinder";
+      const UprightBounds fit =
+          cylinder ? FitUprightCylinder(points, floor) : FitUprightBox(points, floor);
+      fitted[want.name] = fit;
+      part.boxes = FittedSolids(fit, cylinder, want.hole);
+      part.collision = PartSpec::Collision::kSolids;
+      if (carrier != tops.end()) AddWhatStandsOnTop(part, fit, twin_dir);
+      const Eigen::Vector3d size = fit.hi - fit.lo;
+      spdlog::info("twin: {} collides as a fitted {} ({:.4f} x {:.4f} x {:.4f} m)", want.name,
+                   want.shape, size.x(), size.y(), size.z());
+    }
+  };
+  auto table_under = [&](const PartSpec& part) {
+    const Eigen::Vector3d at = Centroid(PartMesh(part, twin_dir).vertices);
+    return support.ZAt(at.head<2>());
+  };
   for (std::size_t round = 0; round < recipe.parts.size(); ++round) {
     double best = 1e300;
     std::size_t best_r = 0;
@@ -245,6 +422,7 @@ void ApplyRecipe(TwinSpec& spec, const sim::TwinRecipe& recipe,
                                   "a segment of the scan for '" + recipe.parts[r].name +
                                       "', but every segment is taken (" +
                                       std::to_string(candidates.size()) + " found)");
+      break;
     }
     const auto& want = recipe.parts[best_r];
     const Eigen::Vector3d& has = pick->size;
@@ -256,25 +434,49 @@ void ApplyRecipe(TwinSpec& spec, const sim::TwinRecipe& recipe,
     done[best_r] = true;
     pick->taken = true;
     RenamePart(spec, pick->name, want.name);
-    PartSpec* part = FindPart(spec, want.name);
-    part->fixed = want.fixed;
-    if (want.mass > 0) part->mass = want.mass;
-    if (want.friction > 0) part->friction = want.friction;
-    if (want.shape != "scan") {
-      const std::vector<Eigen::Vector3d> points = PartMesh(*part, twin_dir).vertices;
-      const Eigen::Vector3d at = Centroid(points);
-      const Eigen::Vector3d n(spec.support[0], spec.support[1], spec.support[2]);
-      const double floor = -(spec.support[3] + n.x() * at.x() + n.y() * at.y()) / n.z();
-      const bool cylinder = want.shape == "cylinder";
-      const UprightBounds fit =
-          cylinder ? FitUprightCylinder(points, floor) : FitUprightBox(points, floor);
-      fitted[want.name] = fit;
-      part->boxes = FittedSolids(fit, cylinder, want.hole);
-      part->collision = PartSpec::Collision::kSolids;
-      const Eigen::Vector3d size = fit.hi - fit.lo;
-      spdlog::info("twin: {} collides as a fitted {} ({:.4f} x {:.4f} x {:.4f} m)", want.name,
-                   want.shape, size.x(), size.y(), size.z());
-    }
+  }
+  std::map<std::string, double> floors;  // the z a part carved out of another stands on
+  for (std::size_t r = 0; r < recipe.parts.size(); ++r) {
+    const auto& want = recipe.parts[r];
+    if (want.on.empty()) continue;
+    const std::string field = "twin.parts[" + std::to_string(r) + "].on";
+    const auto carrier = std::find_if(recipe.parts.begin(), recipe.parts.end(),
+                                      [&](const auto& p) { return p.name == want.on; });
+    if (carrier == recipe.parts.end() || !carrier->on.empty() || carrier->shape == "drawing")
+      throw core::ConfigError(origin, field,
+                              "another part of the recipe with its own segment, not a drawing, "
+                              "got '" + want.on + "'");
+    PartSpec& under = *FindPart(spec, want.on);
+    const Mesh whole = PartMesh(under, twin_dir);
+    const double width = std::min(want.size[0], want.size[1]);
+    double top = 0;
+    const std::vector<OnTop> label = StandingOnTop(whole, support, 0.25 * width, top);
+    const Mesh carved =
+        KeepTriangles(whole, [&](std::size_t t) { return label[t] == OnTop::kStands; });
+    if (carved.empty())
+      throw core::ConfigError(origin, field,
+                              "a part standing on '" + want.on + "', but nothing " +
+                                  std::to_string(int(0.25 * width * 1000)) +
+                                  " mm wide stands on its top");
+    PartSpec part;
+    part.name = want.name;
+    part.mesh = "meshes/" + want.name + ".ply";
+    WriteMesh(twin_dir / part.mesh, carved);
+    under.mesh = "meshes/" + want.on + ".ply";
+    under.cuts.clear();
+    WriteMesh(twin_dir / under.mesh,
+              KeepTriangles(whole, [&](std::size_t t) { return label[t] == OnTop::kNo; }));
+    const Eigen::Vector3d size = UprightSize(carved.vertices);
+    spdlog::info("twin: {} stands on {} ({:.3f} m up): {:.3f} x {:.3f} x {:.3f} m", want.name,
+                 want.on, top, size.x(), size.y(), size.z());
+    spec.parts.push_back(part);
+    floors[want.name] = table_under(part) + top;
+    tops[want.on] = top;
+  }
+  for (const auto& want : recipe.parts) {
+    PartSpec& part = *FindPart(spec, want.name);
+    const auto floor = floors.find(want.name);
+    make(want, part, floor != floors.end() ? floor->second : table_under(part));
   }
   // Joints: the one whose parent is the recipe's parent.
   for (std::size_t i = 0; i < recipe.joints.size(); ++i) {
@@ -369,6 +571,7 @@ void ApplyRecipe(TwinSpec& spec, const sim::TwinRecipe& recipe,
     if (want.grip_box[0] > 0 && want.grip_box[1] > 0 && want.grip_box[2] > 0)
       FindPart(spec, want.part)->boxes.push_back(site_box(want.grip_box, want.grip_offset));
   }
+  spec.sites.insert(spec.sites.end(), drawn_sites.begin(), drawn_sites.end());
 }
 
 std::filesystem::path WriteTwinTask(const sim::TaskSpec& task,
@@ -377,6 +580,9 @@ std::filesystem::path WriteTwinTask(const sim::TaskSpec& task,
   twin.scene = "scene.xml";
   if (!twin.robot.empty() && std::filesystem::path(twin.robot).is_relative())
     twin.robot = (task.file.parent_path() / twin.robot).lexically_normal().string();
+  for (auto& part : twin.twin.parts)
+    if (!part.drawing.empty() && std::filesystem::path(part.drawing).is_relative())
+      part.drawing = (task.file.parent_path() / part.drawing).lexically_normal().string();
   const auto path = twin_dir / "task.yaml";
   core::SaveConfig(path, twin);
   return path;

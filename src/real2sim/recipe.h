@@ -40,10 +40,11 @@ void AddMovingPart(TwinSpec& spec, const MovingPart& moving, const ArticulationE
 // Puts the recipe's names on `spec`: each recipe part goes to the unclaimed part of the nearest
 // size (fixed or free, mass and friction as the recipe says); each recipe joint to the joint
 // whose parent became the recipe's parent (its moving part renamed too); then the sites are
-// placed. Throws ConfigError naming `origin` and the recipe field when the scan has nothing for
-// a part or joint.
+// placed. A part of shape "drawing" becomes its drawing (a file next to `task_file`), posed
+// where its segment shows it, with the drawing's sites. Throws ConfigError naming `task_file`
+// and the recipe field when the scan has nothing for a part or joint.
 void ApplyRecipe(TwinSpec& spec, const sim::TwinRecipe& recipe,
-                 const std::filesystem::path& twin_dir, const std::string& origin);
+                 const std::filesystem::path& twin_dir, const std::filesystem::path& task_file);
 
 // Writes twin_dir/task.yaml: `task` with its scene replaced by the twin's scene.xml. Returns
 // its path.

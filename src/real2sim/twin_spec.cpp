@@ -23,6 +23,13 @@ bool BoxSpec::Contains(const Eigen::Vector3d& p) const {
   return true;
 }
 
+Plane SupportOf(const TwinSpec& spec) {
+  Plane plane;
+  plane.normal = Eigen::Vector3d(spec.support[0], spec.support[1], spec.support[2]);
+  plane.offset = spec.support[3];
+  return plane;
+}
+
 const char* ToString(JointType type) {
   switch (type) {
     case JointType::kFixed:

@@ -24,6 +24,7 @@
 
 #include <array>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -85,6 +86,9 @@ struct PartSpec {
   // "solids", `boxes` alone: where the scan's few mm of blur matter (a peg and its hole), solids
   // fitted to the scan (hidden: the scan is what is seen).
   enum class Collision { kScan, kSolids } collision = Collision::kScan;
+  // The centre of mass (base frame), where the mass is not spread evenly over the bounds: a
+  // drawn spatula's steel blade. None: the middle of the part's bounds.
+  std::optional<std::array<double, 3>> com;
   template <class A>
   void Serialize(A& a) {
     a("name", name);
@@ -98,6 +102,7 @@ struct PartSpec {
     a("mass", mass);
     a("friction", friction);
     a("rgba", rgba);
+    a("com", com);
     a.Require(!name.empty(), "name", "a part name");
     a.Require(!mesh.empty(), "mesh", "a mesh file");
     a.Require(mass > 0, "mass", "a positive mass in kg");
@@ -167,6 +172,9 @@ struct TwinSpec {
     a("support", support);
   }
 };
+
+// The table plane the spec's scene stands on.
+Plane SupportOf(const TwinSpec& spec);
 
 // A cut: the triangles whose centroid is outside (subtract) or inside (intersect) the box.
 // Cutting the same mesh both ways splits it into two pieces that together are the whole.

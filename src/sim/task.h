@@ -331,8 +331,17 @@ struct TwinPartRecipe {
   double friction = 0;                  // (0: the build's default)
   // What the part collides as: "scan" (boxes over its scanned surface), or a solid fitted to the
   // scan, "box" or "cylinder" (upright), where the scan's few mm of blur matter: a peg in a
-  // hole, a mug's walls between the fingers.
+  // hole, a mug's walls between the fingers. Or "drawing": a known object (a tool) the scan
+  // cannot rebuild, a spatula's blade flat on the table; its solids, mass and sites come from
+  // `drawing` and only its pose from the scan (real2sim/drawing.h).
   std::string shape = "scan";
+  // With shape "drawing": the MJCF file (relative to the task file) with a body named `name`
+  // whose frame is upright as the object rests.
+  std::string drawing;
+  // A part that stands on another (a pancake on a griddle) is in its segment of the scan: it is
+  // carved out of part `on` (shape "scan"), as what stands on its top, wider than half its own
+  // smaller horizontal `size` (a lip or rim is not). Empty: it has its own segment.
+  std::string on;
   // A box hole down from the middle of a "box" part's top (x, y in its face frame, depth; a
   // depth of 0 or past the bottom goes through), m. Zero: none. The scan cannot show a hole's
   // clearance to a mm; this is the drawing's size.
@@ -346,8 +355,12 @@ struct TwinPartRecipe {
     a("friction", friction);
     a("shape", shape);
     a("hole", hole);
-    a.Require(shape == "scan" || shape == "box" || shape == "cylinder", "shape",
-              "\"scan\", \"box\" or \"cylinder\"");
+    a("drawing", drawing);
+    a("on", on);
+    a.Require(shape == "scan" || shape == "box" || shape == "cylinder" || shape == "drawing",
+              "shape", "\"scan\", \"box\", \"cylinder\" or \"drawing\"");
+    a.Require((shape == "drawing") == !drawing.empty(), "drawing",
+              "an MJCF file with the part's body, given with shape \"drawing\" (and only then)");
     a.Require(hole[0] == 0 || (shape == "box" && hole[0] > 0 && hole[1] > 0 && hole[2] >= 0),
               "hole", "[x, y, depth] in m, on a part of shape \"box\"");
     a.Require(!name.empty(), "name", "a body name");
