@@ -47,7 +47,9 @@ nlohmann::json TwinScore::ToJson() const {
                  {"accuracy_mm", s.accuracy_mm},
                  {"completeness_mm", s.completeness_mm},
                  {"position_mm", s.position_mm},
-                 {"rotation_deg", s.rotation_deg}});
+                 {"rotation_deg", s.rotation_deg},
+                 {"solid_position_mm", s.solid_position_mm},
+                 {"solid_rotation_deg", s.solid_rotation_deg}});
   for (const auto& s : joints)
     j.push_back({{"name", s.name},
                  {"found", s.found},
@@ -125,7 +127,7 @@ TwinScore ScoreTwin(const std::filesystem::path& twin_dir, const std::filesystem
     std::vector<float> xyz(3 * std::size_t(sampler.capacity()));
     const int n = sampler.Transform(m, d, env.base(), everywhere, xyz.data());
     Points full, visible, twin_points;
-    real2sim::Mesh twin_mesh;
+    real2sim::Mesh twin_mesh, solids;
     for (int i = 0; i < n; ++i) full.emplace_back(xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]);
     for (const auto& [g, p] : seen)
       if (mine(g)) visible.push_back(p);
@@ -140,29 +142,28 @@ TwinScore ScoreTwin(const std::filesystem::path& twin_dir, const std::filesystem
           const Points p = real2sim::SampleSurface(mesh, count, 7);
           real2sim::AppendMesh(twin_mesh, mesh);
           twin_points.insert(twin_points.end(), p.begin(), p.end());
+          if (part.collision == real2sim::PartSpec::Collision::kSolids)
+            for (const auto& box : part.boxes) real2sim::AppendMesh(solids, real2sim::BoxMesh(box));
           o.found = true;
         }
     if (o.found && !full.empty() && !visible.empty()) {
       o.accuracy_mm = 1000 * Mean(real2sim::SurfaceDistances(twin_points, world_mesh));
       o.completeness_mm = 1000 * Mean(real2sim::SurfaceDistances(visible, twin_mesh));
       o.chamfer_mm = 0.5 * (o.accuracy_mm + o.completeness_mm);
-      if (getenv("ZZ_DUMP")) {  // ZZDIAG
-        const auto acc = real2sim::NearestDistances(twin_points, full);
-        FILE* f = fopen((std::string(getenv("ZZ_DUMP")) + name + ".txt").c_str(), "w");
-        for (std::size_t i = 0; i < acc.size(); ++i)
-          fprintf(f, "t %f %f %f %f\n", twin_points[i].x(), twin_points[i].y(), twin_points[i].z(),
-                  acc[i]);
-        const auto comp = real2sim::NearestDistances(visible, twin_points);
-        for (std::size_t i = 0; i < comp.size(); ++i)
-          fprintf(f, "v %f %f %f %f\n", visible[i].x(), visible[i].y(), visible[i].z(), comp[i]);
-        fclose(f);
-      }
-      const core::Pose fix = real2sim::AlignPoints(twin_points, full, 0.02);
-      // How far the fix moves the twin's own centre (its translation alone would count a turn
-      // about the robot's base as a shift).
-      const Eigen::Vector3d centre = real2sim::Centroid(twin_points);
-      o.position_mm = 1000 * (fix * centre - centre).norm();
-      o.rotation_deg = Eigen::AngleAxisd(fix.rotation).angle() * 180 / M_PI;
+      // The rigid motion that best moves `points` onto the world's: how far it moves their own
+      // centre (its translation alone would count a turn about the robot's base as a shift) and
+      // by what angle it turns them.
+      auto pose_error = [&](const Points& points, double& position_mm, double& rotation_deg) {
+        const core::Pose fix = real2sim::AlignPoints(points, full, 0.02);
+        const Eigen::Vector3d centre = real2sim::Centroid(points);
+        position_mm = 1000 * (fix * centre - centre).norm();
+        rotation_deg = Eigen::AngleAxisd(fix.rotation).angle() * 180 / M_PI;
+      };
+      pose_error(twin_points, o.position_mm, o.rotation_deg);
+      if (!solids.empty())
+        pose_error(real2sim::SampleSurface(
+                       solids, std::max(100, int(solids.Area() * options.density)), 9),
+                   o.solid_position_mm, o.solid_rotation_deg);
       chamfers.push_back(o.chamfer_mm);
     }
     score.objects.push_back(o);

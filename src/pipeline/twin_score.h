@@ -11,7 +11,7 @@
 //  - chamfer: the mean of the two (a twin cannot know what no view saw, so the first direction
 //    goes to the full surface and the second comes from the visible one);
 //  - pose: the rigid motion (ICP) that best moves the twin's surface onto the world's: how far it
-//    moves the twin's centre, and by what angle it turns it.
+//    moves the twin's centre, and by what angle it turns it; and the same for its fitted solids.
 // Per task joint: the angle between the axes (opening directions), the upper limit's error, and
 // for a hinge the distance of the twin's axis from the world's. Per twin site that the world
 // also has: the offset between the two (informative; not a target).
@@ -39,6 +39,10 @@ struct ObjectScore {
   bool found = false;  // the twin has a part of this name
   double accuracy_mm = 0, completeness_mm = 0, chamfer_mm = 0;
   double position_mm = 0, rotation_deg = 0;
+  // The same for what the physics moves, where the part collides as solids fitted to its scan
+  // (or drawn): a blurred scan of a 2 cm square peg turns under ICP where its fitted box does
+  // not. Zero: the twin collides as its scan.
+  double solid_position_mm = 0, solid_rotation_deg = 0;
 };
 
 struct JointScore {
