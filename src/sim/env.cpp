@@ -336,14 +336,22 @@ void Env::PoseRobot(const ArmVector& q, double finger, double closure) {
 }
 
 void Env::PlaceBody(int body, const core::Pose& pose) {
-  const mjModel* m = model_.get();
+  mjModel* m = model_.get();
   const int free = body >= 0 && body < m->nbody ? FreeJointOf(m, body) : -1;
+  const core::Pose world = base_ * pose;
+  if (free < 0 && body > 0 && body < m->nbody && m->body_parentid[body] == 0 &&
+      m->body_jntnum[body] == 0) {
+    // Welded to the world (a griddle): moved in this env's model, as RandomizePoses moves it.
+    std::copy(world.translation.data(), world.translation.data() + 3, m->body_pos + 3 * body);
+    core::QuatToMj(world.rotation, m->body_quat + 4 * body);
+    mj_kinematics(m, data_.get());
+    return;
+  }
   if (free < 0) {
     const char* name = body >= 0 && body < m->nbody ? mj_id2name(m, mjOBJ_BODY, body) : nullptr;
     throw core::Error(task_->spec().name + ": body " + (name ? name : std::to_string(body)) +
-                      " has no free joint to place it by");
+                      " has no free joint to place it by, nor hangs welded from the world");
   }
-  const core::Pose world = base_ * pose;
   double* qpos = data_->qpos + m->jnt_qposadr[free];
   std::copy(world.translation.data(), world.translation.data() + 3, qpos);
   core::QuatToMj(world.rotation, qpos + 3);

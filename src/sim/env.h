@@ -85,7 +85,9 @@ class Env {
   // at `closure`, velocities zero; positions recomputed (mj_kinematics).
   void PoseRobot(const ArmVector& q, double finger, double closure);
   // A body with a free joint (an object) placed at `pose`, robot base frame; velocities zero,
-  // positions recomputed. Throws core::Error naming a body that has no free joint.
+  // positions recomputed. A body welded to the world (a griddle) is moved in this env's model,
+  // as pose randomization moves it, until the next reset. Throws core::Error naming any other
+  // body (one on a joint, one inside another).
   void PlaceBody(int body, const core::Pose& pose);
   // Robot base pose in the world.
   const core::Pose& base() const { return base_; }

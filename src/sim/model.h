@@ -30,7 +30,7 @@ DataPtr MakeData(const mjModel* m);
 // Whether body `body` is `root` or hangs below it (false for the world body and for root < 1).
 bool InSubtree(const mjModel* m, int body, int root);
 
-// The body's free joint (a body Env::PlaceBody can place), or -1.
+// The body's free joint (an object), or -1.
 int FreeJointOf(const mjModel* m, int body);
 
 // "2.2.2"
