@@ -161,9 +161,9 @@ TwinScore ScoreTwin(const std::filesystem::path& twin_dir, const std::filesystem
       };
       pose_error(twin_points, o.position_mm, o.rotation_deg);
       if (!solids.empty())
-        pose_error(real2sim::SampleSurface(
-                       solids, std::max(100, int(solids.Area() * options.density)), 9),
-                   o.solid_position_mm, o.solid_rotation_deg);
+        pose_error(
+            real2sim::SampleSurface(solids, std::max(100, int(solids.Area() * options.density)), 9),
+            o.solid_position_mm, o.solid_rotation_deg);
       chamfers.push_back(o.chamfer_mm);
     }
     score.objects.push_back(o);

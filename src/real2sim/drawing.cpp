@@ -72,7 +72,8 @@ Drawing ReadDrawing(const std::filesystem::path& mjcf, const std::string& body) 
 
 DrawingFit PoseDrawing(const Drawing& drawing, const std::vector<Eigen::Vector3d>& points,
                        const Plane& support) {
-  if (points.empty()) throw core::Error("drawing: the scan has no points of '" + drawing.body + "'");
+  if (points.empty())
+    throw core::Error("drawing: the scan has no points of '" + drawing.body + "'");
   const Mesh surface = drawing.Surface();
   const SurfaceQuery query(surface);
   const double depth = drawing.Depth();

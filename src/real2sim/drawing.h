@@ -15,10 +15,10 @@
 namespace twinforge::real2sim {
 
 struct Drawing {
-  std::string body;             // the drawn body's name
-  std::vector<BoxSpec> solids;  // its geoms (boxes and cylinders), in its frame
-  std::vector<Eigen::Vector3d> colours;  // one per solid, 0..1
-  double mass = 0;                       // kg
+  std::string body;                               // the drawn body's name
+  std::vector<BoxSpec> solids;                    // its geoms (boxes and cylinders), in its frame
+  std::vector<Eigen::Vector3d> colours;           // one per solid, 0..1
+  double mass = 0;                                // kg
   Eigen::Vector3d com = Eigen::Vector3d::Zero();  // centre of mass, its frame
   struct Point {
     std::string name;

@@ -171,6 +171,15 @@ std::pair<Eigen::Vector3d, double> Settle(const sim::ModelPtr& m, const sim::Dat
   return {Eigen::Vector3d(d->xpos + 3 * b), d->xmat[9 * b + 8]};
 }
 
+// A proposed spec of one segment, object_0, whose mesh is `mesh` (under the twin directory).
+TwinSpec OneSegment(const std::string& mesh) {
+  TwinSpec spec;
+  spec.parts.resize(1);
+  spec.parts[0].name = "object_0";
+  spec.parts[0].mesh = mesh;
+  return spec;
+}
+
 // A recipe part that collides as a solid fitted to its scan.
 sim::TwinPartRecipe FittedPart(const char* name, const std::array<double, 3>& size,
                                const char* shape, double mass) {
@@ -247,10 +256,7 @@ TEST(Export, AFittedCylinderStandsStill) {
   cylinder->Translate(Eigen::Vector3d(0.5, -0.15, 0.045));
   WriteMesh(dir / "meshes/mug.ply",
             Blurred({cylinder->vertices_, {}, cylinder->triangles_}, 0.001, 3));
-  TwinSpec spec;
-  spec.parts.resize(1);
-  spec.parts[0].name = "object_0";
-  spec.parts[0].mesh = "meshes/mug.ply";
+  TwinSpec spec = OneSegment("meshes/mug.ply");
   sim::TwinRecipe recipe;
   recipe.parts = {FittedPart("mug", {0.08, 0.08, 0.09}, "cylinder", 0.3)};
   ApplyRecipe(spec, recipe, dir, "test recipe");
@@ -276,18 +282,17 @@ TEST(Export, AFittedCylinderStandsStill) {
 // over its bounds, the same mass tips it onto the handle.
 TEST(Export, ADrawnSpatulaRestsOnItsBlade) {
   const auto dir = core::testing::TestDir("export", "drawn");
-  const auto task = std::filesystem::path(TWINFORGE_ASSETS_DIR) / "tasks/spatula_flipping/task.yaml";
+  const auto task =
+      std::filesystem::path(TWINFORGE_ASSETS_DIR) / "tasks/spatula_flipping/task.yaml";
   const Drawing drawing = ReadDrawing(task.parent_path() / "scene.xml", "spatula");
   const core::Pose truth{Eigen::Vector3d(0.4, -0.2, drawing.Depth()), core::Yaw(0.4)};
   auto handle = open3d::geometry::TriangleMesh::CreateBox(0.12, 0.02, 0.016);
   handle->Translate(Eigen::Vector3d(-0.12, -0.01, -0.008));
   handle = handle->SubdivideMidpoint(3);
   handle->Transform(truth.Matrix());
-  WriteMesh(dir / "meshes/handle.ply", Blurred({handle->vertices_, {}, handle->triangles_}, 0.001, 4));
-  TwinSpec spec;
-  spec.parts.resize(1);
-  spec.parts[0].name = "object_0";
-  spec.parts[0].mesh = "meshes/handle.ply";
+  WriteMesh(dir / "meshes/handle.ply",
+            Blurred({handle->vertices_, {}, handle->triangles_}, 0.001, 4));
+  TwinSpec spec = OneSegment("meshes/handle.ply");
   sim::TwinRecipe recipe;
   recipe.parts = {FittedPart("spatula", {0.12, 0.02, 0.02}, "drawing", 0)};
   recipe.parts[0].drawing = "scene.xml";
@@ -319,10 +324,7 @@ TEST(Export, ADrawnSpatulaRestsOnItsBlade) {
 TEST(Export, APartOnAnotherNeedsACarrierWithItsOwnSegment) {
   const auto dir = core::testing::TestDir("export", "on");
   WriteMesh(dir / "meshes/block.ply", Panels({{{0.5, 0, 0}, {0.1, 0.1, 0.05}}}));
-  TwinSpec spec;
-  spec.parts.resize(1);
-  spec.parts[0].name = "object_0";
-  spec.parts[0].mesh = "meshes/block.ply";
+  TwinSpec spec = OneSegment("meshes/block.ply");
   sim::TwinRecipe recipe;
   recipe.parts = {FittedPart("griddle", {0.1, 0.1, 0.05}, "box", 1),
                   FittedPart("pancake", {0.08, 0.08, 0.01}, "cylinder", 0.05)};

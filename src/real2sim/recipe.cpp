@@ -362,7 +362,7 @@ void ApplyRecipe(TwinSpec& spec, const sim::TwinRecipe& recipe,
   std::vector<bool> done(recipe.parts.size(), false);
   for (std::size_t r = 0; r < recipe.parts.size(); ++r) done[r] = !recipe.parts[r].on.empty();
   std::map<std::string, UprightBounds> fitted;  // parts that collide as fitted solids
-  std::vector<SiteSpec> drawn_sites;             // the sites of drawn parts, posed
+  std::vector<SiteSpec> drawn_sites;            // the sites of drawn parts, posed
   const Plane support = SupportOf(spec);
   std::map<std::string, double> tops;  // parts others stand on: their top, m above the table
   // The recipe's kind, mass and friction and what it collides as, `floor` the z it stands on.
@@ -371,8 +371,8 @@ void ApplyRecipe(TwinSpec& spec, const sim::TwinRecipe& recipe,
     if (want.mass > 0) part.mass = want.mass;
     if (want.friction > 0) part.friction = want.friction;
     if (want.shape == "drawing") {
-      PoseDrawnPart(part, ReadDrawing(task_file.parent_path() / want.drawing, want.name),
-                    want.mass, support, twin_dir, drawn_sites);
+      PoseDrawnPart(part, ReadDrawing(task_file.parent_path() / want.drawing, want.name), want.mass,
+                    support, twin_dir, drawn_sites);
     } else if (want.shape != "scan") {
       std::vector<Eigen::Vector3d> points = PartMesh(part, twin_dir).vertices;
       const auto carrier = tops.find(want.name);
@@ -445,7 +445,8 @@ void ApplyRecipe(TwinSpec& spec, const sim::TwinRecipe& recipe,
     if (carrier == recipe.parts.end() || !carrier->on.empty() || carrier->shape == "drawing")
       throw core::ConfigError(origin, field,
                               "another part of the recipe with its own segment, not a drawing, "
-                              "got '" + want.on + "'");
+                              "got '" +
+                                  want.on + "'");
     PartSpec& under = *FindPart(spec, want.on);
     const Mesh whole = PartMesh(under, twin_dir);
     const double width = std::min(want.size[0], want.size[1]);
