@@ -211,6 +211,28 @@ double ChamferDistance(const std::vector<Eigen::Vector3d>& a,
   return 0.5 * (mean(NearestDistances(a, b)) + mean(NearestDistances(b, a)));
 }
 
+namespace {
+
+// The turn (rad) with the least `cost(turn in rad)` over a quarter turn: whole degrees from 0,
+// then tenths around the best (so it may lie just below 0).
+template <class Cost>
+double LeastOverQuarterTurn(const Cost& cost) {
+  double best = 0, least = 1e300;
+  auto consider = [&](double deg) {
+    const double c = cost(deg * M_PI / 180);
+    if (c < least - 1e-12) {
+      least = c;
+      best = deg;
+    }
+  };
+  for (int deg = 0; deg < 90; ++deg) consider(deg);
+  const double coarse = best;
+  for (int tenth = -9; tenth <= 9; ++tenth) consider(coarse + 0.1 * tenth);
+  return best * M_PI / 180;
+}
+
+}  // namespace
+
 double UprightYaw(const std::vector<Eigen::Vector3d>& points) {
   const std::size_t stride = std::max<std::size_t>(1, points.size() / 3000);
   auto area = [&](double yaw) {
@@ -224,19 +246,7 @@ double UprightYaw(const std::vector<Eigen::Vector3d>& points) {
     }
     return (hi - lo).prod();
   };
-  // Whole degrees, then tenths around the best.
-  double best_yaw = 0, best_area = 1e300;
-  auto consider = [&](double deg) {
-    const double yaw = deg * M_PI / 180, a = area(yaw);
-    if (a < best_area - 1e-12) {
-      best_area = a;
-      best_yaw = yaw;
-    }
-  };
-  for (int deg = 0; deg < 90; ++deg) consider(deg);
-  const double coarse = best_yaw * 180 / M_PI;
-  for (int tenth = -9; tenth <= 9; ++tenth) consider(coarse + 0.1 * tenth);
-  return std::fmod(best_yaw + M_PI / 2, M_PI / 2);  // in [0, 90) deg
+  return std::fmod(LeastOverQuarterTurn(area) + M_PI / 2, M_PI / 2);  // in [0, 90) deg
 }
 
 core::Pose AlignPoints(const std::vector<Eigen::Vector3d>& source,
@@ -370,22 +380,14 @@ UprightBounds FitUprightBox(const std::vector<Eigen::Vector3d>& points, double f
     FitTopAndBottom(local, floor, rest, false, b);
     return b;
   };
-  // The turn whose faces the points lie closest to: by degrees over a quarter turn, then by
-  // tenths. (The least-area bounds' turn, used until stop 37, was 27 degrees off on the proxy's
-  // scanned 2 cm square peg: blurred corners decide it. This one is 7.)
-  double best = 0, best_residual = 1e300;
-  auto consider = [&](double deg) {
+  // The turn whose faces the points lie closest to. (The least-area bounds' turn, used until
+  // stop 37, was 27 degrees off on the proxy's scanned 2 cm square peg: blurred corners decide
+  // it. This one is 7.)
+  const double best = LeastOverQuarterTurn([&](double yaw) {
     double residual = 0;
-    sides(core::Yaw(deg * M_PI / 180), &residual);
-    if (residual < best_residual - 1e-12) {
-      best_residual = residual;
-      best = deg;
-    }
-  };
-  for (int deg = 0; deg < 90; ++deg) consider(deg);
-  const double coarse = best;
-  for (int tenth = -9; tenth <= 9; ++tenth) consider(coarse + 0.1 * tenth);
-  best *= M_PI / 180;
+    sides(core::Yaw(yaw), &residual);
+    return residual;
+  });
   return sides(core::Yaw(best), nullptr);
 }
 

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <optional>
 
 #include "core/config.h"
 #include "core/error.h"
@@ -64,20 +65,25 @@ const JointSpec* JointOf(const TwinSpec& spec, const std::string& child) {
   return nullptr;
 }
 
+// A hidden solid (base frame) spanning lo..hi in the upright frame turned by `yaw`.
+BoxSpec SolidIn(const core::Quat& yaw, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi,
+                bool cylinder = false) {
+  BoxSpec box;
+  const Eigen::Vector3d centre = yaw * (0.5 * (lo + hi));
+  box.center = {centre.x(), centre.y(), centre.z()};
+  box.size = {hi.x() - lo.x(), hi.y() - lo.y(), hi.z() - lo.z()};
+  box.euler = {0, 0, core::ToRollPitchYaw(yaw).z()};
+  box.shape = cylinder ? SolidShape::kCylinder : SolidShape::kBox;
+  box.hidden = true;
+  return box;
+}
+
 // The solids a part of recipe shape "box" or "cylinder" collides as (base frame): the fitted
 // box, less `hole` (x, y, depth) down from the middle of its top, as up to five boxes.
 std::vector<BoxSpec> FittedSolids(const UprightBounds& fit, bool cylinder,
                                   const std::array<double, 3>& hole) {
-  const double yaw = core::ToRollPitchYaw(fit.yaw).z();
-  auto solid = [&](Eigen::Vector3d lo, Eigen::Vector3d hi) {
-    BoxSpec box;
-    const Eigen::Vector3d centre = fit.yaw * (0.5 * (lo + hi));
-    box.center = {centre.x(), centre.y(), centre.z()};
-    box.size = {hi.x() - lo.x(), hi.y() - lo.y(), hi.z() - lo.z()};
-    box.euler = {0, 0, yaw};
-    box.shape = cylinder ? SolidShape::kCylinder : SolidShape::kBox;
-    box.hidden = true;
-    return box;
+  auto solid = [&](const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) {
+    return SolidIn(fit.yaw, lo, hi, cylinder);
   };
   const Eigen::Vector3d lo = fit.lo, hi = fit.hi, mid = 0.5 * (lo + hi);
   if (hole[0] <= 0) return {solid(lo, hi)};
@@ -294,16 +300,8 @@ void AddWhatStandsOnTop(PartSpec& part, const UprightBounds& fit,
     above.push_back(q);
     above_normals.push_back(fit.yaw.inverse() * normals[i]);
   }
-  const double yaw = core::ToRollPitchYaw(fit.yaw).z();
-  for (const AlignedBox& b : CoverWithBoxes(above, above_normals, 0.005, 0.006)) {
-    BoxSpec box;
-    const Eigen::Vector3d centre = fit.yaw * b.centre;
-    box.center = {centre.x(), centre.y(), centre.z()};
-    box.size = {2 * b.half.x(), 2 * b.half.y(), 2 * b.half.z()};
-    box.euler = {0, 0, yaw};
-    box.hidden = true;
-    part.boxes.push_back(box);
-  }
+  for (const AlignedBox& b : CoverWithBoxes(above, above_normals, 0.005, 0.006))
+    part.boxes.push_back(SolidIn(fit.yaw, b.centre - b.half, b.centre + b.half));
 }
 
 // Part `part` (its scanned segment) becomes `drawing`, posed where the segment shows it: the
@@ -365,8 +363,9 @@ void ApplyRecipe(TwinSpec& spec, const sim::TwinRecipe& recipe,
   std::vector<SiteSpec> drawn_sites;            // the sites of drawn parts, posed
   const Plane support = SupportOf(spec);
   std::map<std::string, double> tops;  // parts others stand on: their top, m above the table
-  // The recipe's kind, mass and friction and what it collides as, `floor` the z it stands on.
-  auto make = [&](const sim::TwinPartRecipe& want, PartSpec& part, double floor) {
+  // The recipe's kind, mass and friction and what it collides as; `floor`: the z it stands on
+  // (none: the table's, under the middle of its scan).
+  auto make = [&](const sim::TwinPartRecipe& want, PartSpec& part, std::optional<double> floor) {
     part.fixed = want.fixed;
     if (want.mass > 0) part.mass = want.mass;
     if (want.friction > 0) part.friction = want.friction;
@@ -375,6 +374,7 @@ void ApplyRecipe(TwinSpec& spec, const sim::TwinRecipe& recipe,
                     support, twin_dir, drawn_sites);
     } else if (want.shape != "scan") {
       std::vector<Eigen::Vector3d> points = PartMesh(part, twin_dir).vertices;
+      if (!floor) floor = support.ZAt(Centroid(points).head<2>());
       const auto carrier = tops.find(want.name);
       if (carrier != tops.end())  // the solid up to its top; what stands on it comes after
         points.erase(std::remove_if(points.begin(), points.end(),
@@ -384,7 +384,7 @@ void ApplyRecipe(TwinSpec& spec, const sim::TwinRecipe& recipe,
                      points.end());
       const bool cylinder = want.shape == "cylinder";
       const UprightBounds fit =
-          cylinder ? FitUprightCylinder(points, floor) : FitUprightBox(points, floor);
+          cylinder ? FitUprightCylinder(points, *floor) : FitUprightBox(points, *floor);
       fitted[want.name] = fit;
       part.boxes = FittedSolids(fit, cylinder, want.hole);
       part.collision = PartSpec::Collision::kSolids;
@@ -393,10 +393,6 @@ void ApplyRecipe(TwinSpec& spec, const sim::TwinRecipe& recipe,
       spdlog::info("twin: {} collides as a fitted {} ({:.4f} x {:.4f} x {:.4f} m)", want.name,
                    want.shape, size.x(), size.y(), size.z());
     }
-  };
-  auto table_under = [&](const PartSpec& part) {
-    const Eigen::Vector3d at = Centroid(PartMesh(part, twin_dir).vertices);
-    return support.ZAt(at.head<2>());
   };
   for (std::size_t round = 0; round < recipe.parts.size(); ++round) {
     double best = 1e300;
@@ -471,13 +467,13 @@ void ApplyRecipe(TwinSpec& spec, const sim::TwinRecipe& recipe,
     spdlog::info("twin: {} stands on {} ({:.3f} m up): {:.3f} x {:.3f} x {:.3f} m", want.name,
                  want.on, top, size.x(), size.y(), size.z());
     spec.parts.push_back(part);
-    floors[want.name] = table_under(part) + top;
+    floors[want.name] = support.ZAt(Centroid(carved.vertices).head<2>()) + top;
     tops[want.on] = top;
   }
   for (const auto& want : recipe.parts) {
     PartSpec& part = *FindPart(spec, want.name);
     const auto floor = floors.find(want.name);
-    make(want, part, floor != floors.end() ? floor->second : table_under(part));
+    make(want, part, floor != floors.end() ? std::optional<double>(floor->second) : std::nullopt);
   }
   // Joints: the one whose parent is the recipe's parent.
   for (std::size_t i = 0; i < recipe.joints.size(); ++i) {
