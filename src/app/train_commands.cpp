@@ -10,6 +10,7 @@
 #include "learn/bench.h"
 #include "learn/distill.h"
 #include "learn/evaluate.h"
+#include "learn/imitate.h"
 #include "learn/ppo.h"
 #include "learn/rollout.h"
 #include "sim/task.h"
@@ -260,6 +261,63 @@ void AddExport(CLI::App& train, int& exit_code) {
   });
 }
 
+// `train imitate`: SAM-RL's actor, a state policy taught by DAgger on the twin's scripted expert.
+void AddImitate(CLI::App& train, int& exit_code) {
+  struct Cli {
+    std::string task, twin, out;
+    learn::ImitationOptions options;
+  };
+  auto cli = std::make_shared<Cli>();
+  auto* c = train.add_subcommand(
+      "imitate",
+      "SAM-RL's actor by imitation in the twin: a state policy taught on the twin's scripted "
+      "expert's episodes, noise injected into its actions (DART); the twin actor acts with it "
+      "(eval --actor twin --actor-policy FILE) (JSON report)");
+  auto& o = cli->options;
+  c->add_option("--task", cli->task, "task name (the twin's) or task.yaml")->required();
+  c->add_option("--twin", cli->twin,
+                "twin directory (`twin build --out`); default: the task's own");
+  c->add_option("--out", cli->out, "policy file to write; its curve goes beside it (.curve.csv)")
+      ->required();
+  c->add_option("--rounds", o.rounds, "rounds: episodes, then training and evaluation")
+      ->check(CLI::Range(1, 1000));
+  c->add_option("--episodes", o.episodes, "expert episodes per round")->check(CLI::PositiveNumber);
+  c->add_option("--train-steps", o.train_steps, "Adam steps after each round")
+      ->check(CLI::PositiveNumber);
+  c->add_option("--lr", o.learning_rate, "Adam learning rate")->check(CLI::Range(1e-6, 1.0));
+  c->add_option("--noise", o.noise,
+                "noise on the expert's actions (its labels stay clean): Gaussian, in units of the "
+                "per-step limits (discrete: the chance of a random move)")
+      ->check(CLI::Range(0.0, 10.0));
+  c->add_option("--level", o.level, "randomization level 0..3")->check(CLI::Range(0, 3));
+  c->add_option("--eval-episodes", o.eval_episodes,
+                "episodes evaluating the learner after each round (0: none, keep the last)")
+      ->check(CLI::NonNegativeNumber);
+  c->add_option("--seed", o.seed, "seed");
+  c->add_option("--threads", o.threads, "worker threads (the result does not depend on them)")
+      ->check(CLI::PositiveNumber);
+  c->callback([cli, &exit_code] {
+    auto task = LoadTrainTask(cli->task, cli->twin);
+    core::Progress progress("imitate", cli->options.rounds, "rounds");
+    const learn::ImitationReport r = learn::TrainImitation(task, cli->out, cli->options, &progress);
+    progress.Finish();
+    nlohmann::json rounds = nlohmann::json::array();
+    for (const auto& row : r.rounds)
+      rounds.push_back({{"round", row.round},
+                        {"episodes", row.episodes},
+                        {"successes", row.successes},
+                        {"steps", row.steps},
+                        {"loss", row.loss},
+                        {"learner_success", row.learner}});
+    std::cout << nlohmann::json{{"policy", cli->out},        {"curve", r.curve.string()},
+                                {"task", task->spec().name}, {"best_round", r.best_round},
+                                {"rounds", rounds},          {"seconds", r.seconds}}
+                     .dump(2)
+              << "\n";
+    exit_code = 0;
+  });
+}
+
 }  // namespace
 
 void AddTrainCommands(CLI::App& parent, int& exit_code) {
@@ -308,6 +366,7 @@ void AddTrainCommands(CLI::App& parent, int& exit_code) {
   AddInverseDistill(*train, exit_code);
   AddRl(*train, exit_code);
   AddDistill(*train, exit_code);
+  AddImitate(*train, exit_code);
   AddExport(*train, exit_code);
   auto bench_options = std::make_shared<learn::LearnBenchOptions>();
   auto* bench = train->add_subcommand(

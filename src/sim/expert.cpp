@@ -194,10 +194,16 @@ Action ScriptedExpert::Act(const Env& env, core::Rng& rng) {
   const auto& steps = task_.spec().expert.steps;
   while (!finished()) {
     const ExpertStep& step = steps[step_];
+    // The step's gripper command, or, on a step that has none, the gripper as it is. A patient
+    // labeller asks for it as the script last commanded it, whatever the learner did to it (the
+    // expert acting alone finds it so).
     double closure = env.gripper().closure;
-    if (step.gripper == GripCommand::kOpen) closure = 0.0;
-    if (step.gripper == GripCommand::kClose) closure = 1.0;
-    if (steps_in_step_ >= step.max_steps) {
+    for (int k = step_; k >= (patient_ ? 0 : step_); --k)
+      if (steps[k].gripper != GripCommand::kKeep) {
+        closure = steps[k].gripper == GripCommand::kClose ? 1.0 : 0.0;
+        break;
+      }
+    if (steps_in_step_ >= step.max_steps && !patient_) {
       Advance();  // give up on this step; later steps may still recover
       continue;
     }

@@ -18,6 +18,10 @@ class ScriptedExpert {
 
   // Starts the script from its first step.
   void Reset();
+  // A patient expert never gives a step up (max_steps does not apply): labelling the states a
+  // learner visits, it keeps asking for what the step needs however long the learner takes, and
+  // for the gripper as the script last commanded it (a learner may have let go).
+  void set_patient(bool patient) { patient_ = patient; }
   // Goes back to the start of step `step` (a step done again: the scene changed under it).
   // Throws core::Error for a step the script does not have.
   void Restart(int step);
@@ -40,6 +44,7 @@ class ScriptedExpert {
   double noise_;
   int step_ = 0;
   int steps_in_step_ = 0;
+  bool patient_ = false;
   core::Pose grasp_in_site_;     // drive steps: tool pose relative to the site at the step start
   bool flip_fingers_ = false;    // move steps: which of the two finger directions to use
   double drive_sign_ = 1.0;      // drive steps: direction of travel of the joint

@@ -1,0 +1,225 @@
+#include "learn/imitate.h"
+
+#include <algorithm>
+#include <fstream>
+
+#include "core/error.h"
+#include "core/log.h"
+#include "core/measure.h"
+#include "core/rng.h"
+#include "core/thread_pool.h"
+#include "learn/policy_net.h"
+#include "learn/rollout.h"
+#include "sim/env.h"
+#include "sim/expert.h"
+
+namespace twinforge::learn {
+namespace {
+
+// Labelled steps: the privileged state seen and the expert's action there (a move index, or the
+// continuous action's components).
+struct Labelled {
+  int state_dim = 0, label_dim = 0;
+  std::vector<float> states, labels;
+  std::size_t size() const { return state_dim ? states.size() / state_dim : 0; }
+};
+
+// `action` with noise a robot's own would resemble: a random move with probability `noise`
+// (discrete), or Gaussian noise of `noise` times the per-step limit on each motion component
+// (continuous). The gripper's command is kept.
+sim::Action Perturb(sim::Action action, const sim::ActionLimits& limits, double noise,
+                    core::Rng& rng) {
+  if (action.mode == sim::ActionMode::kDiscrete) {
+    if (action.index < 12 && rng.Bernoulli(noise)) action.index = int(rng.Index(12));
+    return action;
+  }
+  for (int k = 0; k < 6; ++k)
+    action.value[k] += rng.Normal() * noise * (k < 3 ? limits.translation : limits.rotation);
+  return action;
+}
+
+// Episodes 0 .. count - 1 of a round seeded `seed`: the expert (patient) acts with its action
+// perturbed by `noise` (Perturb), and each state is labelled with the action it chose there.
+// Episode i starts as `sim expert`'s episode i of that seed; the steps are appended in episode
+// order, whatever the thread count. Returns the successes.
+int Gather(std::shared_ptr<const sim::Task> task, double noise, uint64_t seed, int level,
+           int64_t count, int threads, Labelled& data) {
+  const bool discrete = task->spec().control.action == sim::ActionMode::kDiscrete;
+  std::vector<Labelled> per_episode(count);
+  std::vector<char> success(count, 0);
+  core::ThreadPool pool(threads);
+  const int blocks = static_cast<int>(std::min<int64_t>(pool.size(), std::max<int64_t>(count, 1)));
+  pool.ParallelFor(blocks, [&](int64_t block) {
+    sim::Env env(task, static_cast<int>(block));
+    sim::ScriptedExpert expert(*task);
+    expert.set_patient(true);
+    const int state_dim = env.state_dim();
+    for (int64_t j = count * block / blocks; j < count * (block + 1) / blocks; ++j) {
+      core::Rng rng = sim::BeginExpertEpisode(env, expert, seed, j, level);
+      Labelled& out = per_episode[j];
+      out.state_dim = state_dim;
+      out.label_dim = discrete ? 1 : sim::kContinuousActionDim;
+      for (int t = 0; t < task->spec().horizon; ++t) {
+        out.states.resize(out.states.size() + state_dim);
+        float* state = out.states.data() + out.states.size() - state_dim;
+        env.State(state);
+        const sim::Action label = expert.Act(env, rng);
+        if (discrete)
+          out.labels.push_back(float(label.index));
+        else
+          for (double v : label.value) out.labels.push_back(float(v));
+        const sim::StepResult r =
+            env.Step(noise > 0 ? Perturb(label, task->spec().control.limits, noise, rng) : label);
+        if (r.success) {
+          success[j] = 1;
+          break;
+        }
+        if (r.done) break;
+      }
+    }
+  });
+  int successes = 0;
+  for (int64_t j = 0; j < count; ++j) {
+    data.state_dim = per_episode[j].state_dim;
+    data.label_dim = per_episode[j].label_dim;
+    data.states.insert(data.states.end(), per_episode[j].states.begin(),
+                       per_episode[j].states.end());
+    data.labels.insert(data.labels.end(), per_episode[j].labels.begin(),
+                       per_episode[j].labels.end());
+    successes += success[j];
+  }
+  return successes;
+}
+
+// The state's normalization from `data`: its mean and standard deviation, at least `floor`.
+void FitNormalization(PolicyNet& net, const Labelled& data, double floor) {
+  const torch::Tensor s =
+      torch::from_blob(const_cast<float*>(data.states.data()),
+                       {int64_t(data.size()), int64_t(data.state_dim)}, torch::kFloat);
+  torch::NoGradGuard no_grad;
+  net->obs_mean.copy_(s.mean(0));
+  net->obs_std.copy_(s.std(0).clamp_min(floor));
+}
+
+// `steps` Adam steps on batches drawn from all of `data`; returns the mean loss of the last 100.
+double Train(PolicyNet& net, torch::optim::Adam& adam, const Labelled& data, int steps, int batch,
+             core::Rng& rng) {
+  const bool discrete = net->config().discrete;
+  const int64_t n = int64_t(data.size());
+  const torch::Tensor states = torch::from_blob(const_cast<float*>(data.states.data()),
+                                                {n, int64_t(data.state_dim)}, torch::kFloat);
+  const torch::Tensor labels = torch::from_blob(const_cast<float*>(data.labels.data()),
+                                                {n, int64_t(data.label_dim)}, torch::kFloat);
+  net->train();
+  std::vector<int64_t> pick(batch);
+  double tail = 0;
+  int tail_n = 0;
+  for (int step = 1; step <= steps; ++step) {
+    for (auto& k : pick) k = int64_t(rng.Index(uint64_t(n)));
+    const torch::Tensor rows = torch::from_blob(pick.data(), {batch}, torch::kLong);
+    const torch::Tensor out = net->forward({}, states.index_select(0, rows));
+    const torch::Tensor y = labels.index_select(0, rows);
+    const torch::Tensor loss =
+        discrete ? torch::nn::functional::cross_entropy(out, y.view(-1).to(torch::kLong))
+                 : ((out - y) / net->ActionScale()).pow(2).sum(1).mean();
+    adam.zero_grad();
+    loss.backward();
+    torch::nn::utils::clip_grad_norm_(net->parameters(), 5.0);
+    adam.step();
+    if (step > steps - 100) {
+      tail += loss.item<double>();
+      ++tail_n;
+    }
+  }
+  net->eval();
+  return tail_n ? tail / tail_n : NAN;
+}
+
+}  // namespace
+
+ImitationReport TrainImitation(std::shared_ptr<const sim::Task> task,
+                               const std::filesystem::path& out, const ImitationOptions& options,
+                               core::Progress* progress) {
+  const auto start = core::Clock::now();
+  const sim::TaskSpec& spec = task->spec();
+  if (spec.expert.steps.empty())
+    throw core::Error("train imitate: task " + spec.name +
+                      " has no scripted expert (expert: steps) to label the states");
+  const bool discrete = spec.control.action == sim::ActionMode::kDiscrete;
+  PolicyConfig config;
+  config.point_features = 0;
+  config.proprio_dim = sim::StateDim(*task);
+  config.action_dim = discrete ? sim::kDiscreteActions : sim::kContinuousActionDim;
+  config.discrete = discrete;
+  config.hidden = options.hidden;
+  if (!discrete) config.action_scale = ContinuousActionScale(spec.control.limits);
+  torch::manual_seed(options.seed);
+  PolicyNet net(config);
+  torch::optim::Adam adam(net->parameters(), torch::optim::AdamOptions(options.learning_rate));
+  core::Rng rng(options.seed, 0x1717);
+
+  if (out.has_parent_path()) std::filesystem::create_directories(out.parent_path());
+  ImitationReport report;
+  report.curve = out;
+  report.curve += ".curve.csv";
+  std::ofstream curve(report.curve);
+  if (!curve) throw core::IoError(report.curve.string() + ": cannot write the curve");
+  curve << "round,episodes,successes,steps,loss,learner_success,seconds\n";
+  PolicyEvalOptions eval;
+  eval.episodes = options.eval_episodes;
+  eval.level = options.level;
+  eval.seed = options.eval_seed;
+  eval.threads = options.threads;
+  double best = -1;
+  Labelled data;
+  for (int round = 0; round < options.rounds; ++round) {
+    ImitationRound row;
+    row.round = round;
+    row.episodes = options.episodes;
+    const uint64_t seed = core::MixSeed(options.seed, uint64_t(round));
+    row.successes =
+        Gather(task, options.noise, seed, options.level, row.episodes, options.threads, data);
+    if (round == 0) FitNormalization(net, data, options.std_floor);
+    row.steps = long(data.size());
+    row.loss = Train(net, adam, data, options.train_steps, options.batch, rng);
+    if (options.eval_episodes > 0) row.learner = EvaluatePolicy(net, task, eval).success_rate();
+    row.seconds = core::SecondsSince(start);
+    if (options.eval_episodes == 0 || row.learner > best) {
+      best = row.learner;
+      report.best_round = round;
+      SavePolicy(net, out);
+    }
+    curve << row.round << "," << row.episodes << "," << row.successes << "," << row.steps << ","
+          << row.loss << "," << row.learner << "," << row.seconds << "\n";
+    curve.flush();
+    spdlog::info(
+        "imitate: round {}, the expert succeeded in {} of {} noisy episodes; {} labelled steps, "
+        "loss {:.4f}, learner {:.0f}% in the twin",
+        round, row.successes, row.episodes, row.steps, row.loss, 100 * row.learner);
+    report.rounds.push_back(row);
+    if (progress)
+      progress->Set(round + 1,
+                    "learner " + std::to_string(int(std::lround(100 * row.learner))) + "%");
+  }
+  report.seconds = core::SecondsSince(start);
+  return report;
+}
+
+StateActor LoadStateActor(const std::filesystem::path& file, const sim::Task& task) {
+  auto net = std::make_shared<PolicyNet>(LoadPolicy(file));
+  if ((*net)->config().point_features > 0)
+    throw core::Error(file.string() +
+                      ": a point-cloud policy; the actor needs a state policy "
+                      "(train imitate, train rl)");
+  CheckPolicyFitsTask((*net)->config(), task, file.string());
+  (*net)->eval();
+  return [net](const sim::Env& env) {
+    torch::NoGradGuard no_grad;
+    torch::Tensor input = torch::empty({1, env.state_dim()});
+    env.State(input.data_ptr<float>());
+    core::Rng unused(0);
+    return ChooseAction(*net, (*net)->forward({}, input), PolicyEvalOptions{}, unused);
+  };
+}
+
+}  // namespace twinforge::learn
