@@ -1,6 +1,8 @@
 #include "app/twin_actor_cli.h"
 
 #include "core/error.h"
+#include "core/fs.h"
+#include "learn/imitate.h"
 #include "learn/torch_runtime.h"
 #include "pipeline/run_directory.h"
 #include "samrl/active_camera.h"
@@ -14,6 +16,10 @@ void TwinActorCli::Add(CLI::App* c) {
                 "expert acting on object poses estimated from a frame of the robot's movable "
                 "camera)")
       ->check(CLI::IsMember({"policy", "twin"}));
+  c->add_option("--actor-policy", actor_policy,
+                "twin actor: a state policy that chooses the actions instead of the twin's "
+                "scripted expert (train imitate's; the expert still marks when to look again)")
+      ->check(CLI::ExistingFile);
   c->add_option("--look", look,
                 "twin actor: where its camera looks from: active (at each look, the view that "
                 "shows the objects best in the twin as the actor believes it, arm included), "
@@ -48,6 +54,8 @@ void TwinActorCli::Check(const std::string& command, const std::string& policy) 
   if (twin() != policy.empty())
     throw core::Error(twin() ? command + " --actor twin: takes no --policy"
                              : command + ": --policy FILE is needed (or --actor twin)");
+  if (!actor_policy.empty() && !twin())
+    throw core::Error(command + " --actor-policy: goes with --actor twin");
   if ((look == "q") != !q.empty())
     throw core::Error(look == "q" ? command + " --look q: needs --q FILE (train samrl's q.pt)"
                                   : command + " --q: goes with --look q");
@@ -90,6 +98,11 @@ TwinActorOnRobot::TwinActorOnRobot(reality::Robot& robot, const sim::TaskSpec& t
   actor_ = std::make_unique<samrl::TwinActor>(twin_, robot, look_, robot.Info().has_success_oracle,
                                               estimate, core::Pose{}, cli.relook);
   identity_ = {{"actor", "twin"}, {"twin_hash", pipeline::TwinFingerprint(task)}};
+  if (!cli.actor_policy.empty()) {
+    actor_->set_policy(learn::LoadStateActor(cli.actor_policy, *twin_));
+    identity_["actor_policy"] = cli.actor_policy;
+    identity_["actor_policy_hash"] = core::Fingerprint().AddFile(cli.actor_policy).Hex();
+  }
   header_ = identity_;
   header_["look"] = cli.look;
   if (q_.net) header_["q_hash"] = q_.hash;

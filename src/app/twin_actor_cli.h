@@ -20,11 +20,13 @@ namespace twinforge::app {
 struct TwinActorCli {
   std::string actor = "policy";  // what acts: a --policy file, or the twin actor
   std::string look = "active", register_to = "robot";
-  std::string q;  // --look q: the sensing-aware Q (train samrl's q.pt)
+  std::string q;             // --look q: the sensing-aware Q (train samrl's q.pt)
+  std::string actor_policy;  // the twin actor acts with this state policy (train imitate's)
   int capture_scale = 8;
   samrl::RelookOptions relook;
 
-  // --actor, --look, --q, --register-to, --capture-scale, --max-looks, --moved, --max-move.
+  // --actor, --actor-policy, --look, --q, --register-to, --capture-scale, --max-looks, --moved,
+  // --max-move.
   void Add(CLI::App* command);
   // Throws when the options disagree, with each other or with `policy` (the --policy file:
   // needed by --actor policy, refused by --actor twin; --q goes with --look q); `command` names

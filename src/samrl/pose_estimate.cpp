@@ -50,6 +50,7 @@ struct ObjectPoseEstimator::Model {
   std::optional<real2sim::SurfaceQuery> surface;
   double radius = 0;            // m: the farthest vertex from the body's z axis
   double z_min = 0, z_max = 0;  // m: body frame
+  int symmetry = 1;             // turns about z that look alike
 };
 
 ObjectPoseEstimator::ObjectPoseEstimator(std::shared_ptr<const sim::Task> twin,
@@ -77,6 +78,16 @@ ObjectPoseEstimator::ObjectPoseEstimator(std::shared_ptr<const sim::Task> twin,
     model->z_max = mesh.max().z();
     for (const auto& v : mesh.vertices) model->radius = std::max(model->radius, v.head<2>().norm());
     model->surface.emplace(mesh);
+    for (int turns : {4, 2}) {
+      const Eigen::AngleAxisd turn(2 * M_PI / turns, Eigen::Vector3d::UnitZ());
+      std::vector<Eigen::Vector3d> turned;
+      for (const auto& v : mesh.vertices) turned.push_back(turn * v);
+      const std::vector<double> d = model->surface->Distances(turned);
+      if (*std::max_element(d.begin(), d.end()) < 1e-3) {
+        model->symmetry = turns;
+        break;
+      }
+    }
     models_.push_back(std::move(model));
   }
   std::sort(object_geoms_.begin(), object_geoms_.end());
@@ -85,6 +96,25 @@ ObjectPoseEstimator::ObjectPoseEstimator(std::shared_ptr<const sim::Task> twin,
 ObjectPoseEstimator::~ObjectPoseEstimator() = default;
 
 const core::Pose& ObjectPoseEstimator::nominal(int i) const { return models_.at(i)->nominal; }
+
+int ObjectPoseEstimator::symmetry(int i) const { return models_.at(i)->symmetry; }
+
+core::Pose ObjectPoseEstimator::NearestLookAlike(int i, const core::Pose& pose) const {
+  const Model& model = *models_.at(i);
+  core::Pose best = pose;
+  double nearest = core::AngleBetween(pose.rotation, model.nominal.rotation);
+  for (int k = 1; k < model.symmetry; ++k) {
+    core::Pose turned = pose;
+    turned.rotation = pose.rotation * core::Quat(Eigen::AngleAxisd(2 * M_PI * k / model.symmetry,
+                                                                   Eigen::Vector3d::UnitZ()));
+    const double angle = core::AngleBetween(turned.rotation, model.nominal.rotation);
+    if (angle < nearest) {
+      nearest = angle;
+      best = turned;
+    }
+  }
+  return best;
+}
 
 std::vector<Eigen::Vector3d> ObjectPoseEstimator::Foreground(
     const std::vector<Eigen::Vector3d>& frame_points, const sim::ArmVector& q, double gripper_width,

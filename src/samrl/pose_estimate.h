@@ -100,6 +100,13 @@ class ObjectPoseEstimator {
 
   // The twin's own pose of body i.
   const core::Pose& nominal(int i) const;
+  // How many turns about its vertical axis leave body i looking the same (4: a square peg, 2, or
+  // 1): its vertices turned by a quarter (or a half) turn all lie on its surface, within 1 mm.
+  int symmetry(int i) const;
+  // Of the poses of body i that look alike (`pose` turned by its symmetry), the one whose
+  // rotation is nearest the twin's own. A fit cannot tell them apart; a learned actor, trained
+  // on poses near the twin's own, needs the one it has seen.
+  core::Pose NearestLookAlike(int i, const core::Pose& pose) const;
 
  private:
   struct Model;

@@ -99,7 +99,9 @@ double TwinActor::LookAndEstimate(const reality::Observation& o) {
     }
     moved = std::max(moved, d);
     estimates_[i] = found[i];
-    env_.PlaceBody(bodies_[i], found[i].pose);
+    // A learned actor saw objects turned about as the twin has them, not a quarter turn away.
+    if (policy_) estimates_[i].pose = estimator_.NearestLookAlike(int(i), found[i].pose);
+    env_.PlaceBody(bodies_[i], estimates_[i].pose);
     spdlog::debug("twin actor, look {}: {} {} at ({:.3f}, {:.3f}), {} points explained, {} not",
                   looks_, found[i].body, found[i].seen ? "seen" : "NOT seen",
                   found[i].pose.translation.x(), found[i].pose.translation.y(), found[i].inliers,
@@ -118,7 +120,7 @@ reality::OperatorInput TwinActor::Next(const reality::Observation& o) {
   const core::Pose tool = env_.EePose();
   if (carried_ >= 0) env_.PlaceBody(bodies_[carried_], tool * carried_in_tool_);
   if (looks_ == 0) LookAndEstimate(o);
-  if (expert_.finished()) {
+  if (expert_.finished() && !policy_) {
     input.kind = reality::OperatorInput::Kind::kDone;
     return input;
   }
@@ -139,6 +141,7 @@ reality::OperatorInput TwinActor::Next(const reality::Observation& o) {
     }
     break;
   }
+  if (policy_) input.action = policy_(env_);
   const double closure = input.action.mode == sim::ActionMode::kContinuous
                              ? double(input.action.value[6] > 0)
                          : input.action.index == 13 ? 1.0

@@ -1,7 +1,8 @@
 // SAM-RL's base actor on a robot: it acts in the twin, on the twin posed as the robot reports its
 // arm and with the objects where a depth frame shows them, and sends the twin's action to the
-// robot. The twin's scripted expert chooses the actions; the state it reads is the estimate, never
-// the scene's own (a robot has no privileged state).
+// robot. The twin's scripted expert chooses the actions, or a policy learned by imitating it
+// (`set_policy`); the state they read is the estimate, never the scene's own (a robot has no
+// privileged state).
 //
 // At a trial's first step the actor looks (a callback returns the frames: the fixed camera's, or
 // a frame from a view it chose) and estimates every object's pose. Afterwards the arm follows
@@ -17,6 +18,7 @@
 #include <vector>
 
 #include "core/rng.h"
+#include "learn/imitate.h"
 #include "reality/robot.h"
 #include "reality/teleop.h"
 #include "samrl/pose_estimate.h"
@@ -73,6 +75,10 @@ class TwinActor : public reality::Operator {
 
   // Before each trial: the expert starts over and the scene is looked at again.
   void Begin(uint64_t seed);
+  // A learned actor (train imitate's policy) chooses the actions instead of the expert. The
+  // expert still runs alongside on the same twin, only to say when a step marked `look` is done;
+  // the episode no longer ends when its script does.
+  void set_policy(learn::StateActor policy) { policy_ = std::move(policy); }
 
   reality::OperatorInput Next(const reality::Observation& o) override;
   std::string name() const override { return "twin actor"; }
@@ -99,6 +105,7 @@ class TwinActor : public reality::Operator {
   core::Pose camera_correction_;
   sim::Env env_;
   sim::ScriptedExpert expert_;
+  learn::StateActor policy_;
   ObjectPoseEstimator estimator_;
   std::vector<int> bodies_;
   std::vector<ObjectPose> estimates_;

@@ -1,0 +1,42 @@
+#include "samrl/pose_estimate.h"
+
+#include <gtest/gtest.h>
+
+#include "core/se3.h"
+#include "sim/task.h"
+
+namespace twinforge::samrl {
+namespace {
+
+// The square peg and the block with its square hole look the same every quarter turn; the
+// spatula only once a turn. Of a fit's look-alike poses, the one nearest the twin's own is taken.
+TEST(PoseEstimate, LookAlikeTurnsOfSquareObjects) {
+  auto peg = std::make_shared<const sim::Task>(sim::LoadTaskSpec("peg_insertion"));
+  const ObjectPoseEstimator estimator(peg, {"peg", "hole_block"});
+  EXPECT_EQ(estimator.symmetry(0), 4);
+  EXPECT_EQ(estimator.symmetry(1), 4);
+  for (int i = 0; i < 2; ++i)
+    for (double turn : {0.0, 0.5, 1.0, 1.5}) {
+      const double yaw = 0.2 + M_PI * turn;  // 0.2 rad from the twin's own, and quarter turns
+      core::Pose fitted = estimator.nominal(i);
+      fitted.translation.x() += 0.03;
+      fitted.rotation = core::AxisAngle(Eigen::Vector3d::UnitZ(), yaw) * fitted.rotation;
+      const core::Pose chosen = estimator.NearestLookAlike(i, fitted);
+      EXPECT_NEAR(core::AngleBetween(chosen.rotation, estimator.nominal(i).rotation), 0.2, 1e-6)
+          << "body " << i << ", " << turn << " half turns";
+      EXPECT_TRUE(chosen.translation.isApprox(fitted.translation));
+    }
+
+  auto spatula = std::make_shared<const sim::Task>(sim::LoadTaskSpec("spatula_flipping"));
+  const ObjectPoseEstimator tools(spatula, {"spatula"});
+  EXPECT_EQ(tools.symmetry(0), 1);
+  core::Pose reversed = tools.nominal(0);
+  reversed.rotation = core::AxisAngle(Eigen::Vector3d::UnitZ(), M_PI) * reversed.rotation;
+  EXPECT_NEAR(
+      core::AngleBetween(tools.NearestLookAlike(0, reversed).rotation, tools.nominal(0).rotation),
+      M_PI, 1e-6)
+      << "a spatula turned round is not the same spatula";
+}
+
+}  // namespace
+}  // namespace twinforge::samrl
