@@ -24,24 +24,10 @@ struct Labelled {
   std::size_t size() const { return state_dim ? states.size() / state_dim : 0; }
 };
 
-// `action` with noise a robot's own would resemble: a random move with probability `noise`
-// (discrete), or Gaussian noise of `noise` times the per-step limit on each motion component
-// (continuous). The gripper's command is kept.
-sim::Action Perturb(sim::Action action, const sim::ActionLimits& limits, double noise,
-                    core::Rng& rng) {
-  if (action.mode == sim::ActionMode::kDiscrete) {
-    if (action.index < 12 && rng.Bernoulli(noise)) action.index = int(rng.Index(12));
-    return action;
-  }
-  for (int k = 0; k < 6; ++k)
-    action.value[k] += rng.Normal() * noise * (k < 3 ? limits.translation : limits.rotation);
-  return action;
-}
-
 // Episodes 0 .. count - 1 of a round seeded `seed`: the expert (patient) acts with its action
-// perturbed by `noise` (Perturb), and each state is labelled with the action it chose there.
-// Episode i starts as `sim expert`'s episode i of that seed; the steps are appended in episode
-// order, whatever the thread count. Returns the successes.
+// perturbed by `noise` (sim::PerturbAction), and each state is labelled with the action it chose
+// there. Episode i starts as `sim expert`'s episode i of that seed; the steps are appended in
+// episode order, whatever the thread count. Returns the successes.
 int Gather(std::shared_ptr<const sim::Task> task, double noise, uint64_t seed, int level,
            int64_t count, int threads, Labelled& data) {
   const bool discrete = task->spec().control.action == sim::ActionMode::kDiscrete;
@@ -68,8 +54,8 @@ int Gather(std::shared_ptr<const sim::Task> task, double noise, uint64_t seed, i
           out.labels.push_back(float(label.index));
         else
           for (double v : label.value) out.labels.push_back(float(v));
-        const sim::StepResult r =
-            env.Step(noise > 0 ? Perturb(label, task->spec().control.limits, noise, rng) : label);
+        const sim::StepResult r = env.Step(
+            noise > 0 ? sim::PerturbAction(label, task->spec().control.limits, noise, rng) : label);
         if (r.success) {
           success[j] = 1;
           break;

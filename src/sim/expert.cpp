@@ -264,16 +264,7 @@ Action ScriptedExpert::Act(const Env& env, core::Rng& rng) {
       action = Toward(env, ahead * site_pose * grasp_in_site_, closure);
     }
     ++steps_in_step_;
-    if (noise_ > 0) {
-      if (action.mode == ActionMode::kDiscrete && action.index < 12 && rng.Bernoulli(noise_)) {
-        action.index = static_cast<int>(rng.Index(12));
-      } else if (action.mode == ActionMode::kContinuous) {
-        const auto& limits = task_.spec().control.limits;
-        for (int k = 0; k < 6; ++k)
-          action.value[k] += rng.Normal() * noise_ * (k < 3 ? limits.translation : limits.rotation);
-      }
-    }
-    return action;
+    return noise_ > 0 ? PerturbAction(action, task_.spec().control.limits, noise_, rng) : action;
   }
   return HoldStill(env);
 }
@@ -285,6 +276,16 @@ Action ScriptedExpert::Act(const Env& env, core::Rng& rng) {
 #include "core/thread_pool.h"
 
 namespace twinforge::sim {
+
+Action PerturbAction(Action action, const ActionLimits& limits, double noise, core::Rng& rng) {
+  if (action.mode == ActionMode::kDiscrete) {
+    if (action.index < 12 && rng.Bernoulli(noise)) action.index = static_cast<int>(rng.Index(12));
+    return action;
+  }
+  for (int k = 0; k < 6; ++k)
+    action.value[k] += rng.Normal() * noise * (k < 3 ? limits.translation : limits.rotation);
+  return action;
+}
 
 core::Rng BeginExpertEpisode(Env& env, ScriptedExpert& expert, uint64_t seed, int64_t episode,
                              int level) {

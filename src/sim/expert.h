@@ -54,6 +54,11 @@ class ScriptedExpert {
   core::Quat kept_rotation_;     // keep_orientation steps: the tool orientation at the start
 };
 
+// `action` with noise: a random move with probability `noise` (discrete), or Gaussian noise of
+// `noise` times the per-step limit on each motion component (continuous). The gripper's command
+// is kept. The expert's own noise, and the noise injected into its actions to teach a learner.
+Action PerturbAction(Action action, const ActionLimits& limits, double noise, core::Rng& rng);
+
 // Discrete actions, at the limit of the move grid: the first move of the best short sequence
 // (turns and moves) toward `goal`, given in the tool frame; -1 when staying put is best.
 int RefiningMove(const core::Pose& goal, const ActionLimits& limits);
