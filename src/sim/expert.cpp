@@ -194,9 +194,8 @@ Action ScriptedExpert::Act(const Env& env, core::Rng& rng) {
   const auto& steps = task_.spec().expert.steps;
   while (!finished()) {
     const ExpertStep& step = steps[step_];
-    // The step's gripper command, or, on a step that has none, the gripper as it is. A patient
-    // labeller asks for it as the script last commanded it, whatever the learner did to it (the
-    // expert acting alone finds it so).
+    // The step's gripper command, or, on a step that has none, the gripper as it is; a patient
+    // expert asks for it as the script last commanded it.
     double closure = env.gripper().closure;
     for (int k = step_; k >= (patient_ ? 0 : step_); --k)
       if (steps[k].gripper != GripCommand::kKeep) {

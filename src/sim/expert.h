@@ -18,9 +18,10 @@ class ScriptedExpert {
 
   // Starts the script from its first step.
   void Reset();
-  // A patient expert never gives a step up (max_steps does not apply): labelling the states a
-  // learner visits, it keeps asking for what the step needs however long the learner takes, and
-  // for the gripper as the script last commanded it (a learner may have let go).
+  // A patient expert never gives a step up (max_steps does not apply): teaching a learner (its
+  // actions perturbed, learn/imitate.h), it keeps asking for what the step needs however long the
+  // noise keeps it from getting there, and for the gripper as the script last commanded it, not
+  // as the gripper is.
   void set_patient(bool patient) { patient_ = patient; }
   // Goes back to the start of step `step` (a step done again: the scene changed under it).
   // Throws core::Error for a step the script does not have.
