@@ -261,7 +261,8 @@ void AddExport(CLI::App& train, int& exit_code) {
   });
 }
 
-// `train imitate`: SAM-RL's actor, a state policy taught by DAgger on the twin's scripted expert.
+// `train imitate`: SAM-RL's actor, a state policy taught on the twin's scripted expert's episodes
+// with noise injected into its actions.
 void AddImitate(CLI::App& train, int& exit_code) {
   struct Cli {
     std::string task, twin, out;

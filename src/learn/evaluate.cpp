@@ -205,18 +205,12 @@ PolicyEvalReport EvaluatePolicy(PolicyNet& net, std::shared_ptr<const sim::Task>
   return report;
 }
 
-namespace {
-
-// A policy file's network in evaluation mode; throws Error naming the file when it does not fit
-// the task.
 PolicyNet LoadPolicyFor(const std::filesystem::path& policy, const sim::Task& task) {
   PolicyNet net = LoadPolicy(policy);
   CheckPolicyFitsTask(net->config(), task, policy.string());
   net->eval();
   return net;
 }
-
-}  // namespace
 
 PolicyEvalReport EvaluatePolicy(const std::filesystem::path& policy,
                                 std::shared_ptr<const sim::Task> task,

@@ -192,13 +192,11 @@ ImitationReport TrainImitation(std::shared_ptr<const sim::Task> task,
 }
 
 StateActor LoadStateActor(const std::filesystem::path& file, const sim::Task& task) {
-  auto net = std::make_shared<PolicyNet>(LoadPolicy(file));
+  auto net = std::make_shared<PolicyNet>(LoadPolicyFor(file, task));
   if ((*net)->config().point_features > 0)
     throw core::Error(file.string() +
                       ": a point-cloud policy; the actor needs a state policy "
                       "(train imitate, train rl)");
-  CheckPolicyFitsTask((*net)->config(), task, file.string());
-  (*net)->eval();
   return [net](const sim::Env& env) {
     torch::NoGradGuard no_grad;
     torch::Tensor input = torch::empty({1, env.state_dim()});

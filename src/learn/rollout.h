@@ -6,6 +6,7 @@
 // Includes <torch/torch.h> (via policy_net.h): include it only from learn's .cpp files and tests.
 #pragma once
 
+#include <filesystem>
 #include <memory>
 #include <string>
 #include <vector>
@@ -44,6 +45,9 @@ std::vector<double> ContinuousActionScale(const sim::ActionLimits& limits);
 // fit the task.
 void CheckPolicyFitsTask(const PolicyConfig& config, const sim::Task& task,
                          const std::string& what);
+// A policy file's network in evaluation mode; throws Error naming the file when it does not fit
+// the task.
+PolicyNet LoadPolicyFor(const std::filesystem::path& policy, const sim::Task& task);
 
 // Runs episodes first .. first + count - 1, episode i reset with MixSeed(options.seed, i) at
 // options.level, split over options.threads; the outcome does not depend on the thread count.

@@ -79,7 +79,7 @@ ObjectPoseEstimator::ObjectPoseEstimator(std::shared_ptr<const sim::Task> twin,
     for (const auto& v : mesh.vertices) model->radius = std::max(model->radius, v.head<2>().norm());
     model->surface.emplace(mesh);
     for (int turns : {4, 2}) {
-      const Eigen::AngleAxisd turn(2 * M_PI / turns, Eigen::Vector3d::UnitZ());
+      const core::Quat turn = core::Yaw(2 * M_PI / turns);
       std::vector<Eigen::Vector3d> turned;
       for (const auto& v : mesh.vertices) turned.push_back(turn * v);
       const std::vector<double> d = model->surface->Distances(turned);
@@ -105,8 +105,7 @@ core::Pose ObjectPoseEstimator::NearestLookAlike(int i, const core::Pose& pose) 
   double nearest = core::AngleBetween(pose.rotation, model.nominal.rotation);
   for (int k = 1; k < model.symmetry; ++k) {
     core::Pose turned = pose;
-    turned.rotation = pose.rotation * core::Quat(Eigen::AngleAxisd(2 * M_PI * k / model.symmetry,
-                                                                   Eigen::Vector3d::UnitZ()));
+    turned.rotation = pose.rotation * core::Yaw(2 * M_PI * k / model.symmetry);
     const double angle = core::AngleBetween(turned.rotation, model.nominal.rotation);
     if (angle < nearest) {
       nearest = angle;

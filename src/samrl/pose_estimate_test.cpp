@@ -20,7 +20,7 @@ TEST(PoseEstimate, LookAlikeTurnsOfSquareObjects) {
       const double yaw = 0.2 + M_PI * turn;  // 0.2 rad from the twin's own, and quarter turns
       core::Pose fitted = estimator.nominal(i);
       fitted.translation.x() += 0.03;
-      fitted.rotation = core::AxisAngle(Eigen::Vector3d::UnitZ(), yaw) * fitted.rotation;
+      fitted.rotation = core::Yaw(yaw) * fitted.rotation;
       const core::Pose chosen = estimator.NearestLookAlike(i, fitted);
       EXPECT_NEAR(core::AngleBetween(chosen.rotation, estimator.nominal(i).rotation), 0.2, 1e-6)
           << "body " << i << ", " << turn << " half turns";
@@ -31,7 +31,7 @@ TEST(PoseEstimate, LookAlikeTurnsOfSquareObjects) {
   const ObjectPoseEstimator tools(spatula, {"spatula"});
   EXPECT_EQ(tools.symmetry(0), 1);
   core::Pose reversed = tools.nominal(0);
-  reversed.rotation = core::AxisAngle(Eigen::Vector3d::UnitZ(), M_PI) * reversed.rotation;
+  reversed.rotation = core::Yaw(M_PI) * reversed.rotation;
   EXPECT_NEAR(
       core::AngleBetween(tools.NearestLookAlike(0, reversed).rotation, tools.nominal(0).rotation),
       M_PI, 1e-6)
