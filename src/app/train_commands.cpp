@@ -25,16 +25,32 @@ struct BcCli {
 };
 
 // The twin's task file when --twin is given (its task must be --task), else the task itself.
-std::shared_ptr<const sim::Task> LoadTrainTask(const std::string& task, const std::string& twin) {
-  if (twin.empty()) return std::make_shared<const sim::Task>(sim::LoadTaskSpec(task));
-  const std::filesystem::path file = std::filesystem::path(twin) / "task.yaml";
-  if (!std::filesystem::exists(file))
-    throw core::IoError(twin + ": no task.yaml (make the twin with `twin build --task " + task +
-                        "`)");
-  sim::TaskSpec spec = sim::LoadTaskSpec(file.string());
-  if (!task.empty() && spec.name != task)
-    throw core::ConfigError(file.string(), "name",
-                            "the twin is of task '" + spec.name + "', not '" + task + "'");
+// The task to train on: `task` (a name or a task.yaml), or the twin's in `twin`. With
+// `controller`, a task.yaml `sysid` wrote, the arm follows its commands through the controller
+// identified there (control.servo, control.arm_scales) rather than the task's own.
+std::shared_ptr<const sim::Task> LoadTrainTask(const std::string& task, const std::string& twin,
+                                               const std::string& controller = "") {
+  sim::TaskSpec spec;
+  if (twin.empty()) {
+    spec = sim::LoadTaskSpec(task);
+  } else {
+    const std::filesystem::path file = std::filesystem::path(twin) / "task.yaml";
+    if (!std::filesystem::exists(file))
+      throw core::IoError(twin + ": no task.yaml (make the twin with `twin build --task " + task +
+                          "`)");
+    spec = sim::LoadTaskSpec(file.string());
+    if (!task.empty() && spec.name != task)
+      throw core::ConfigError(file.string(), "name",
+                              "the twin is of task '" + spec.name + "', not '" + task + "'");
+  }
+  if (!controller.empty()) {
+    const sim::TaskSpec identified = sim::LoadTaskSpec(controller);
+    if (identified.control.servo.ideal())
+      throw core::ConfigError(controller, "control.servo",
+                              "an ideal servo: not a controller sysid identified");
+    spec.control.servo = identified.control.servo;
+    spec.control.arm_scales = identified.control.arm_scales;
+  }
   return std::make_shared<const sim::Task>(std::move(spec));
 }
 
@@ -265,7 +281,7 @@ void AddExport(CLI::App& train, int& exit_code) {
 // with noise injected into its actions.
 void AddImitate(CLI::App& train, int& exit_code) {
   struct Cli {
-    std::string task, twin, out;
+    std::string task, twin, controller, out;
     learn::ImitationOptions options;
   };
   auto cli = std::make_shared<Cli>();
@@ -278,6 +294,11 @@ void AddImitate(CLI::App& train, int& exit_code) {
   c->add_option("--task", cli->task, "task name (the twin's) or task.yaml")->required();
   c->add_option("--twin", cli->twin,
                 "twin directory (`twin build --out`); default: the task's own");
+  c->add_option("--controller", cli->controller,
+                "a task.yaml sysid wrote (`sysid --out DIR`: DIR/task.yaml): the twin's arm "
+                "follows its commands through the controller identified there (latency, servo "
+                "interpolation, gains), as the real arm does")
+      ->check(CLI::ExistingFile);
   c->add_option("--out", cli->out, "policy file to write; its curve goes beside it (.curve.csv)")
       ->required();
   c->add_option("--rounds", o.rounds, "rounds: episodes, then training and evaluation")
@@ -298,7 +319,7 @@ void AddImitate(CLI::App& train, int& exit_code) {
   c->add_option("--threads", o.threads, "worker threads (the result does not depend on them)")
       ->check(CLI::PositiveNumber);
   c->callback([cli, &exit_code] {
-    auto task = LoadTrainTask(cli->task, cli->twin);
+    auto task = LoadTrainTask(cli->task, cli->twin, cli->controller);
     core::Progress progress("imitate", cli->options.rounds, "rounds");
     const learn::ImitationReport r = learn::TrainImitation(task, cli->out, cli->options, &progress);
     progress.Finish();
@@ -310,9 +331,10 @@ void AddImitate(CLI::App& train, int& exit_code) {
                         {"steps", row.steps},
                         {"loss", row.loss},
                         {"learner_success", row.learner}});
-    std::cout << nlohmann::json{{"policy", cli->out},        {"curve", r.curve.string()},
-                                {"task", task->spec().name}, {"best_round", r.best_round},
-                                {"rounds", rounds},          {"seconds", r.seconds}}
+    std::cout << nlohmann::json{{"policy", cli->out},         {"curve", r.curve.string()},
+                                {"task", task->spec().name},  {"controller", cli->controller},
+                                {"best_round", r.best_round}, {"rounds", rounds},
+                                {"seconds", r.seconds}}
                      .dump(2)
               << "\n";
     exit_code = 0;

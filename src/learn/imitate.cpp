@@ -201,6 +201,14 @@ StateActor LoadStateActor(const std::filesystem::path& file, const sim::Task& ta
     torch::NoGradGuard no_grad;
     torch::Tensor input = torch::empty({1, env.state_dim()});
     env.State(input.data_ptr<float>());
+    if (spdlog::should_log(spdlog::level::debug)) {
+      // Inputs far outside the states it was taught on: the actor is guessing there.
+      const torch::Tensor z = ((input[0] - (*net)->obs_mean) / (*net)->obs_std).abs();
+      for (int64_t k = 0; k < z.size(0); ++k)
+        if (z[k].item<float>() > 4)
+          spdlog::debug("state actor: input {} is {:.3f}, {:.1f} sd from its teaching states", k,
+                        input[0][k].item<float>(), z[k].item<float>());
+    }
     core::Rng unused(0);
     return ChooseAction(*net, (*net)->forward({}, input), PolicyEvalOptions{}, unused);
   };
