@@ -24,10 +24,9 @@ struct BcCli {
   learn::BcOptions options;
 };
 
-// The twin's task file when --twin is given (its task must be --task), else the task itself.
-// The task to train on: `task` (a name or a task.yaml), or the twin's in `twin`. With
-// `controller`, a task.yaml `sysid` wrote, the arm follows its commands through the controller
-// identified there (control.servo, control.arm_scales) rather than the task's own.
+// The task to train on: `task` (a name or a task.yaml), or the twin's in `twin` (its task must
+// be `task`). With `controller`, a task.yaml `sysid` wrote, the arm follows its commands through
+// the controller identified there (control.servo, control.arm_scales), not the task's own.
 std::shared_ptr<const sim::Task> LoadTrainTask(const std::string& task, const std::string& twin,
                                                const std::string& controller = "") {
   sim::TaskSpec spec;
