@@ -73,4 +73,12 @@ void ThreadPool::ParallelFor(int64_t n, const std::function<void(int64_t)>& fn) 
   if (error_) std::rethrow_exception(std::exchange(error_, nullptr));
 }
 
+void ThreadPool::ParallelRanges(
+    int64_t count, const std::function<void(int range, int64_t begin, int64_t end)>& fn) {
+  const int64_t ranges = std::min<int64_t>(size(), count);
+  ParallelFor(ranges, [&](int64_t r) {
+    fn(static_cast<int>(r), count * r / ranges, count * (r + 1) / ranges);
+  });
+}
+
 }  // namespace twinforge::core

@@ -28,6 +28,13 @@ class ThreadPool {
   // serves one loop, not several concurrent ones.
   void ParallelFor(int64_t n, const std::function<void(int64_t)>& fn);
 
+  // Splits items [0, count) into contiguous ranges, at most one per thread and none empty, and
+  // calls fn(range, begin, end) for each, so that a range builds its costly state (an env) once.
+  // Which range an item falls in depends on the pool's size: a result that must not depend on the
+  // thread count has to depend on the item's index only.
+  void ParallelRanges(int64_t count,
+                      const std::function<void(int range, int64_t begin, int64_t end)>& fn);
+
  private:
   void WorkerLoop(int worker);
   void RunBlock(int block);

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <stdexcept>
 #include <vector>
@@ -16,6 +17,24 @@ TEST(ThreadPool, RunsEveryTaskExactlyOnce) {
     for (int64_t n : {0, 1, 2, 7, 1000}) {
       std::vector<std::atomic<int>> counts(n);
       pool.ParallelFor(n, [&](int64_t i) { counts[i].fetch_add(1); });
+      for (int64_t i = 0; i < n; ++i) ASSERT_EQ(counts[i].load(), 1) << threads << " " << i;
+    }
+  }
+}
+
+TEST(ThreadPool, RangesCoverEveryItemOnceInContiguousNonEmptyPieces) {
+  for (int threads : {1, 2, 3, 8}) {
+    ThreadPool pool(threads);
+    for (int64_t n : {0, 1, 2, 7, 1000}) {
+      std::vector<std::atomic<int>> counts(n);
+      std::atomic<int> ranges{0};
+      pool.ParallelRanges(n, [&](int range, int64_t begin, int64_t end) {
+        EXPECT_LT(begin, end) << threads << " " << n;
+        EXPECT_LT(range, pool.size());
+        ranges.fetch_add(1);
+        for (int64_t i = begin; i < end; ++i) counts[i].fetch_add(1);
+      });
+      EXPECT_EQ(ranges.load(), std::min<int64_t>(threads, n)) << threads << " " << n;
       for (int64_t i = 0; i < n; ++i) ASSERT_EQ(counts[i].load(), 1) << threads << " " << i;
     }
   }

@@ -162,10 +162,9 @@ DistillCollection CollectDistill(PolicyNet& teacher, PolicyNet* actor,
   };
   std::vector<Kept> episodes(count);
   core::ThreadPool pool(options.threads);
-  const int blocks = static_cast<int>(std::min<int64_t>(pool.size(), std::max<int64_t>(count, 1)));
-  pool.ParallelFor(blocks, [&](int64_t block) {
+  pool.ParallelRanges(count, [&](int block, int64_t begin, int64_t end) {
     torch::NoGradGuard no_grad;
-    sim::Env env(task, static_cast<int>(block));
+    sim::Env env(task, block);
     const int state_dim = env.state_dim();
     sim::CloudMaker::Options cloud_options;
     cloud_options.scene_points = options.scene_points;
@@ -183,7 +182,7 @@ DistillCollection CollectDistill(PolicyNet& teacher, PolicyNet* actor,
     PolicyEvalOptions choose;
     choose.sample = options.sample;
     const int horizon = task->spec().horizon;
-    for (int64_t j = count * block / blocks; j < count * (block + 1) / blocks; ++j) {
+    for (int64_t j = begin; j < end; ++j) {
       const uint64_t seed = core::MixSeed(options.seed, static_cast<uint64_t>(first + j));
       env.Reset(seed, options.level);
       core::Rng cloud_rng(seed, 0xc1), sample_rng(seed, 0x5a), action_rng(seed, 0xac);

@@ -130,10 +130,9 @@ std::vector<PolicyEpisode> RunPolicyEpisodes(PolicyNet& net, std::shared_ptr<con
   const bool discrete = config.discrete;
   std::vector<PolicyEpisode> episodes(count);
   core::ThreadPool pool(options.threads);
-  const int blocks = static_cast<int>(std::min<int64_t>(pool.size(), std::max<int64_t>(count, 1)));
-  pool.ParallelFor(blocks, [&](int64_t block) {
+  pool.ParallelRanges(count, [&](int block, int64_t begin, int64_t end) {
     torch::NoGradGuard no_grad;
-    sim::Env env(task, static_cast<int>(block));
+    sim::Env env(task, block);
     const int state_dim = env.state_dim();
     const int input_dim = points ? sim::kProprioDim : state_dim;
     std::unique_ptr<sim::CloudMaker> clouds;
@@ -151,7 +150,7 @@ std::vector<PolicyEpisode> RunPolicyEpisodes(PolicyNet& net, std::shared_ptr<con
     torch::Tensor point_input = torch::empty({1, config.points, 4});
     torch::Tensor input = torch::empty({1, input_dim});
     const int horizon = task->spec().horizon;
-    for (int64_t j = count * block / blocks; j < count * (block + 1) / blocks; ++j) {
+    for (int64_t j = begin; j < end; ++j) {
       const uint64_t seed = core::MixSeed(options.seed, static_cast<uint64_t>(first + j));
       env.Reset(seed, options.level);
       core::Rng cloud_rng(seed, 0xc1), sample_rng(seed, 0x5a), action_rng(seed, 0xac);

@@ -34,13 +34,12 @@ int Gather(std::shared_ptr<const sim::Task> task, double noise, uint64_t seed, i
   std::vector<Labelled> per_episode(count);
   std::vector<char> success(count, 0);
   core::ThreadPool pool(threads);
-  const int blocks = static_cast<int>(std::min<int64_t>(pool.size(), std::max<int64_t>(count, 1)));
-  pool.ParallelFor(blocks, [&](int64_t block) {
-    sim::Env env(task, static_cast<int>(block));
+  pool.ParallelRanges(count, [&](int block, int64_t begin, int64_t end) {
+    sim::Env env(task, block);
     sim::ScriptedExpert expert(*task);
     expert.set_patient(true);
     const int state_dim = env.state_dim();
-    for (int64_t j = count * block / blocks; j < count * (block + 1) / blocks; ++j) {
+    for (int64_t j = begin; j < end; ++j) {
       core::Rng rng = sim::BeginExpertEpisode(env, expert, seed, j, level);
       Labelled& out = per_episode[j];
       out.state_dim = state_dim;

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "core/error.h"
+#include "core/thread_pool.h"
 
 namespace twinforge::sim {
 
@@ -268,13 +269,6 @@ Action ScriptedExpert::Act(const Env& env, core::Rng& rng) {
   return HoldStill(env);
 }
 
-}  // namespace twinforge::sim
-
-#include <mutex>
-
-#include "core/thread_pool.h"
-
-namespace twinforge::sim {
 
 Action PerturbAction(Action action, const ActionLimits& limits, double noise, core::Rng& rng) {
   if (action.mode == ActionMode::kDiscrete) {
@@ -300,14 +294,11 @@ ExpertReport EvaluateExpert(std::shared_ptr<const Task> task, int episodes, int 
   report.episodes = episodes;
   std::vector<int> steps_to_success(episodes, -1);
   core::ThreadPool pool(threads);
-  std::vector<std::unique_ptr<Env>> envs(pool.size());
-  std::mutex mutex;
-  // Each pool block takes a contiguous range of episodes; each episode depends only on its seed.
-  const int blocks = pool.size();
-  pool.ParallelFor(blocks, [&](int64_t block) {
-    Env env(task, static_cast<int>(block));
+  // Each range builds one env; each episode depends only on its seed.
+  pool.ParallelRanges(episodes, [&](int block, int64_t begin, int64_t end) {
+    Env env(task, block);
     ScriptedExpert expert(*task, noise);
-    for (int64_t i = episodes * block / blocks; i < episodes * (block + 1) / blocks; ++i) {
+    for (int64_t i = begin; i < end; ++i) {
       core::Rng rng = BeginExpertEpisode(env, expert, seed, i, level);
       for (int t = 0; t < task->spec().horizon; ++t) {
         const StepResult r = env.Step(expert.Act(env, rng));
