@@ -2,9 +2,52 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
 #include "core/error.h"
 
 namespace twinforge::samrl {
+namespace {
+
+// How far `point` (world) is from the nearest of a body's geoms: 0 inside one. Boxes, spheres,
+// cylinders and capsules exactly; other shapes (meshes, ellipsoids) by their bounding sphere.
+double DistanceToBody(const mjModel* m, const mjData* d, int body, const Eigen::Vector3d& point) {
+  double nearest = std::numeric_limits<double>::infinity();
+  for (int g = 0; g < m->ngeom; ++g) {
+    if (m->geom_bodyid[g] != body) continue;
+    const Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> rotation(d->geom_xmat +
+                                                                                  9 * g);
+    const Eigen::Vector3d q =
+        rotation.transpose() * (point - Eigen::Map<const Eigen::Vector3d>(d->geom_xpos + 3 * g));
+    const double* size = m->geom_size + 3 * g;
+    double distance = 0;
+    switch (m->geom_type[g]) {
+      case mjGEOM_BOX:
+        distance = (q.cwiseAbs() - Eigen::Map<const Eigen::Vector3d>(size)).cwiseMax(0.0).norm();
+        break;
+      case mjGEOM_SPHERE:
+        distance = std::max(q.norm() - size[0], 0.0);
+        break;
+      case mjGEOM_CYLINDER:
+        distance = std::hypot(std::max(q.head<2>().norm() - size[0], 0.0),
+                              std::max(std::abs(q.z()) - size[1], 0.0));
+        break;
+      case mjGEOM_CAPSULE:
+        distance = std::max(
+            (q - Eigen::Vector3d(0, 0, std::clamp(q.z(), -size[1], size[1]))).norm() - size[0],
+            0.0);
+        break;
+      default:
+        distance = std::max(q.norm() - m->geom_rbound[g], 0.0);
+    }
+    nearest = std::min(nearest, distance);
+  }
+  return nearest;
+}
+
+}  // namespace
 
 Look FixedLook(reality::Robot& robot, const core::Pose& pose,
                const sim::CameraIntrinsics& intrinsics) {
@@ -148,10 +191,11 @@ reality::OperatorInput TwinActor::Next(const reality::Observation& o) {
                          : input.action.index == 12 ? 0.0
                                                     : closure_;
   if (closure > 0.5 && closure_ <= 0.5) {
-    // The fingers close on the object nearest the tool, which then moves with it.
+    // The fingers close on the object whose surface is nearest the tool, which then moves with
+    // it. Not the nearest body frame: a spatula's is at its middle, 7 cm from its handle.
     double nearest = 0.05;
     for (std::size_t i = 0; i < bodies_.size(); ++i) {
-      const double d = (env_.BodyPose(bodies_[i]).translation - tool.translation).norm();
+      const double d = DistanceToBody(env_.model(), env_.data(), bodies_[i], tool.translation);
       if (d < nearest) {
         nearest = d;
         carried_ = int(i);

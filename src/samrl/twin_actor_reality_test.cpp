@@ -86,6 +86,31 @@ TEST(TwinActorOnReality, InsertsThePegWhereTheEstimateSaysTheHoleIs) {
   EXPECT_GE(successes, 3) << successes << " of " << trials;
 }
 
+// The fingers close on the spatula's handle, 7 cm from the spatula's frame (its middle): the twin
+// carries the spatula up with the tool as the proxy's gripper lifts it. It used to take only an
+// object whose frame was within 5 cm, so the twin's spatula stayed on the table and the expert
+// chased its blade across the room.
+TEST(TwinActorOnReality, CarriesTheSpatulaItClosesOnByTheHandle) {
+  learn::PinMathThreads(1);
+  Scene scene("spatula_flipping");
+  TwinActor actor(
+      scene.task, scene.proxy,
+      FixedLook(scene.proxy, scene.camera.pose, ScaleIntrinsics(scene.camera.intrinsics, 8)), true);
+  reality::ActionClient client(scene.proxy, scene.spec.control.limits);
+  reality::Observation o = scene.proxy.Reset({5000, 1});
+  client.ResetGripper();
+  actor.Begin(5000);
+  // Grasped by step 22; lifted toward the griddle by step 30.
+  reality::RunOperator(scene.proxy, actor, client, o, 30, false);
+  const sim::Env& hidden = scene.proxy.hidden_env();
+  const int real = mj_name2id(hidden.model(), mjOBJ_BODY, "spatula");
+  const int twin = mj_name2id(actor.twin().model(), mjOBJ_BODY, "spatula");
+  const Eigen::Vector3d real_at = hidden.BodyPose(real).translation;
+  ASSERT_GT(real_at.z(), 0.1) << "the proxy's gripper did not lift the spatula";
+  EXPECT_LT((actor.twin().BodyPose(twin).translation - real_at).norm(), 0.02)
+      << "the twin's spatula is not where the proxy's is";
+}
+
 // Level 3 shoves the block a few cm while the peg is on its way. Looking once, the actor puts
 // the peg where the block was; looking again from over the hole (the task's expert marks that
 // step `look`), it finds the block moved, comes over it again and inserts the peg. The trials are
