@@ -44,6 +44,10 @@ void TwinActorCli::Add(CLI::App* c) {
                 "twin actor: m an object must be found from where it was believed to count as "
                 "moved (smaller shifts are the estimate's own scatter)")
       ->check(CLI::PositiveNumber);
+  c->add_flag("--measure-reach", relook.measure_reach,
+              "twin actor: once the held object is lifted, look at it in the hand, measure how "
+              "far it reaches toward the sites the expert carries on it (a spatula's blade tip) "
+              "and move them there");
   c->add_option("--max-move", relook.max_move,
                 "twin actor: m beyond which an object found is taken for a misfit (clutter taken "
                 "for it), not a push, and ignored")
@@ -109,6 +113,7 @@ TwinActorOnRobot::TwinActorOnRobot(reality::Robot& robot, const sim::TaskSpec& t
   header_["max_looks"] = cli.relook.max_looks;
   header_["moved"] = cli.relook.moved;
   header_["max_move"] = cli.relook.max_move;
+  if (cli.relook.measure_reach) header_["measure_reach"] = true;
   header_["capture"] = {capture.width, capture.height};
 }
 

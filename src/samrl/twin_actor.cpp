@@ -4,7 +4,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <limits>
+#include <set>
 
 #include "core/error.h"
 
@@ -46,6 +48,19 @@ double DistanceToBody(const mjModel* m, const mjData* d, int body, const Eigen::
   }
   return nearest;
 }
+
+// The site a step carries, when it is on `body` (-1 otherwise).
+int CarriedSiteOn(const mjModel* m, const sim::ExpertStep& step, int body) {
+  const int site = step.carry.empty() ? -1 : mj_name2id(m, mjOBJ_SITE, step.carry.c_str());
+  return site >= 0 && m->site_bodyid[site] == body ? site : -1;
+}
+
+// A held object's reach: its points are those within this distance of its drawing, and a
+// measured reach this far from the drawn one is a misfit, not the object. The farthest few
+// points are left out as strays; fewer points than the minimum measure nothing.
+constexpr double kReachMargin = 0.03;
+constexpr int kReachStray = 4;
+constexpr int kReachMinPoints = 50;
 
 }  // namespace
 
@@ -103,11 +118,14 @@ void TwinActor::Begin(uint64_t seed) {
   rng_ = core::Rng(seed, 0x7a1);
   expert_.Reset();
   env_.Reset(0, 0);
+  // Sites a reach measurement moved go back to the drawing's (a new trial may hold another).
+  std::copy_n(task_->model()->site_pos, 3 * env_.model()->nsite, env_.mutable_model()->site_pos);
   estimates_.clear();
   looks_ = 0;
   redone_ = 0;
   closure_ = 0;
   carried_ = -1;
+  reach_measured_ = false;
 }
 
 double TwinActor::LookAndEstimate(const reality::Observation& o) {
@@ -153,6 +171,58 @@ double TwinActor::LookAndEstimate(const reality::Observation& o) {
   return moved;
 }
 
+void TwinActor::MeasureReach(const reality::Observation& o) {
+  const auto& names = task_->spec().objects;
+  LookContext context{o, {}, names[carried_]};
+  for (std::size_t i = 0; i < bodies_.size(); ++i)
+    context.objects.emplace_back(names[i], env_.BodyPose(bodies_[i]));
+  std::vector<Eigen::Vector3d> seen;
+  for (const reality::RgbdFrame& frame : look_(context)) {
+    const auto p =
+        estimator_.Foreground(FramePoints(frame, camera_correction_), o.q, o.gripper_width);
+    seen.insert(seen.end(), p.begin(), p.end());
+  }
+  reach_measured_ = true;
+  const int body = bodies_[carried_];
+  const mjModel* m = env_.model();
+  const core::Pose pose = env_.BodyPose(body);
+  const Eigen::Vector3d grasp = carried_in_tool_.Inverse().translation;  // body frame
+  // The points on the held object: near its drawing (which may be short of it by a few cm).
+  std::vector<Eigen::Vector3d> on;
+  for (const Eigen::Vector3d& p : seen)
+    if (DistanceToBody(m, env_.data(), body, p) < kReachMargin) on.push_back(pose.Inverse() * p);
+  std::set<int> carried_sites;
+  for (const auto& step : task_->spec().expert.steps)
+    if (const int site = CarriedSiteOn(m, step, body); site >= 0) carried_sites.insert(site);
+  const std::string& name = names[carried_];
+  for (const int site : carried_sites) {
+    const Eigen::Vector3d drawn = Eigen::Map<const Eigen::Vector3d>(m->site_pos + 3 * site);
+    const double length = (drawn - grasp).norm();
+    const Eigen::Vector3d way = (drawn - grasp) / length;
+    std::vector<double> along;
+    for (const Eigen::Vector3d& p : on) along.push_back((p - grasp).dot(way));
+    // The farthest points but a few, which may be the sensor's stray returns.
+    if (int(along.size()) < kReachMinPoints) {
+      spdlog::info("twin actor: {} held, {} points on it; its reach is not measured", name,
+                   along.size());
+      continue;
+    }
+    std::nth_element(along.begin(), along.begin() + kReachStray, along.end(), std::greater<>());
+    const double reach = along[kReachStray];
+    const char* site_name = mj_id2name(m, mjOBJ_SITE, site);
+    if (std::abs(reach - length) > kReachMargin) {
+      spdlog::info("twin actor: {}'s points reach {:.0f} mm toward {}, drawn {:.0f} mm; ignored",
+                   name, 1e3 * reach, site_name, 1e3 * length);
+      continue;
+    }
+    spdlog::info("twin actor: {} reaches {:+.1f} mm farther toward {} than drawn ({} points)", name,
+                 1e3 * (reach - length), site_name, along.size());
+    Eigen::Map<Eigen::Vector3d>(env_.mutable_model()->site_pos + 3 * site) =
+        drawn + (reach - length) * way;
+  }
+  mj_kinematics(env_.model(), env_.mutable_data());
+}
+
 reality::OperatorInput TwinActor::Next(const reality::Observation& o) {
   reality::OperatorInput input;
   if (oracle_ && looks_ > 0 && robot_.QuerySuccess() == reality::SuccessAnswer::kSuccess) {
@@ -184,6 +254,13 @@ reality::OperatorInput TwinActor::Next(const reality::Observation& o) {
     }
     break;
   }
+  // The first step that carried a site on the held object just done: look at it in the hand.
+  if (relook_.measure_reach && !reach_measured_ && carried_ >= 0)
+    for (int s = step; s < expert_.current_step(); ++s)
+      if (CarriedSiteOn(env_.model(), steps[s], bodies_[carried_]) >= 0) {
+        MeasureReach(o);
+        break;
+      }
   if (policy_) input.action = policy_(env_);
   const double closure = input.action.mode == sim::ActionMode::kContinuous
                              ? double(input.action.value[6] > 0)

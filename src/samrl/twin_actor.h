@@ -48,11 +48,18 @@ struct RelookOptions {
   // part of the arm) was taken for it, and it is ignored. On the proxy pegs, 11 of 70 moves
   // found at level 3 were 6-28 cm, the rest 0.5-3.4 cm.
   double max_move = 0.05;
+  // Once a trial, when the first expert step that carries a site on the held object is done,
+  // look at the object in the hand (not counted in max_looks; nothing else is re-estimated):
+  // measure how far it reaches from the grasp toward each site the expert carries on it (the
+  // farthest of its points that way) and move those sites there. A drawn spatula's blade may be
+  // a centimetre short of the real one's.
+  bool measure_reach = false;
   template <class A>
   void Serialize(A& a) {
     a("max_looks", max_looks);
     a("moved", moved);
     a("max_move", max_move);
+    a("measure_reach", measure_reach);
     a.Require(max_looks >= 1, "max_looks", "at least the first look");
     a.Require(moved > 0 && max_move > moved, "moved", "0 < moved < max_move, in m");
   }
@@ -112,6 +119,9 @@ class TwinActor : public reality::Operator {
   // Looks at the scene; re-estimates every object but the carried one. Returns the largest
   // distance (table plane) an object seen was found from where it was believed.
   double LookAndEstimate(const reality::Observation& o);
+  // Looks at the held object and moves its carried sites to where its points end.
+  void MeasureReach(const reality::Observation& o);
+  bool reach_measured_ = false;  // this trial
 
   RelookOptions relook_;
   core::Rng rng_{0};
