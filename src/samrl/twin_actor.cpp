@@ -187,10 +187,17 @@ void TwinActor::MeasureReach(const reality::Observation& o) {
   const mjModel* m = env_.model();
   const core::Pose pose = env_.BodyPose(body);
   const Eigen::Vector3d grasp = carried_in_tool_.Inverse().translation;  // body frame
-  // The points on the held object: near its drawing (which may be short of it by a few cm).
+  // The points on the held object: near its drawing (which may be short of it by a few cm), and
+  // nearer it than any other object where the twin has them (a pancake just past the blade).
   std::vector<Eigen::Vector3d> on;
-  for (const Eigen::Vector3d& p : seen)
-    if (DistanceToBody(m, env_.data(), body, p) < kReachMargin) on.push_back(pose.Inverse() * p);
+  for (const Eigen::Vector3d& p : seen) {
+    const double d = DistanceToBody(m, env_.data(), body, p);
+    if (d >= kReachMargin) continue;
+    const bool others = std::any_of(bodies_.begin(), bodies_.end(), [&](int other) {
+      return other != body && DistanceToBody(m, env_.data(), other, p) <= d;
+    });
+    if (!others) on.push_back(pose.Inverse() * p);
+  }
   std::set<int> carried_sites;
   for (const auto& step : task_->spec().expert.steps)
     if (const int site = CarriedSiteOn(m, step, body); site >= 0) carried_sites.insert(site);
