@@ -128,11 +128,16 @@ void TwinActor::Begin(uint64_t seed) {
   reach_measured_ = false;
 }
 
-double TwinActor::LookAndEstimate(const reality::Observation& o) {
+LookContext TwinActor::Context(const reality::Observation& o) const {
   const auto& names = task_->spec().objects;
   LookContext context{o, {}, carried_ >= 0 ? names[carried_] : ""};
   for (std::size_t i = 0; i < bodies_.size(); ++i)
     context.objects.emplace_back(names[i], env_.BodyPose(bodies_[i]));
+  return context;
+}
+
+double TwinActor::LookAndEstimate(const reality::Observation& o) {
+  const LookContext context = Context(o);
   const core::Pose held = carried_ >= 0 ? env_.BodyPose(bodies_[carried_]) : core::Pose{};
   std::vector<Eigen::Vector3d> points;
   for (const reality::RgbdFrame& frame : look_(context)) {
@@ -173,11 +178,8 @@ double TwinActor::LookAndEstimate(const reality::Observation& o) {
 
 void TwinActor::MeasureReach(const reality::Observation& o) {
   const auto& names = task_->spec().objects;
-  LookContext context{o, {}, names[carried_]};
-  for (std::size_t i = 0; i < bodies_.size(); ++i)
-    context.objects.emplace_back(names[i], env_.BodyPose(bodies_[i]));
   std::vector<Eigen::Vector3d> seen;
-  for (const reality::RgbdFrame& frame : look_(context)) {
+  for (const reality::RgbdFrame& frame : look_(Context(o))) {
     const auto p =
         estimator_.Foreground(FramePoints(frame, camera_correction_), o.q, o.gripper_width);
     seen.insert(seen.end(), p.begin(), p.end());

@@ -116,6 +116,8 @@ class TwinActor : public reality::Operator {
   ObjectPoseEstimator estimator_;
   std::vector<int> bodies_;
   std::vector<ObjectPose> estimates_;
+  // What the actor believes and holds, for the look callback.
+  LookContext Context(const reality::Observation& o) const;
   // Looks at the scene; re-estimates every object but the carried one. Returns the largest
   // distance (table plane) an object seen was found from where it was believed.
   double LookAndEstimate(const reality::Observation& o);
