@@ -65,7 +65,9 @@ RealityEvalReport RunEpisodes(const sim::TaskSpec& twin, const SensingQTrainOpti
   };
   samrl::RelookOptions once;
   once.max_looks = 1;
-  samrl::TwinActor actor(std::make_shared<const sim::Task>(twin), *robot, look, true, {}, {}, once);
+  // The workers share the cores: each fits its objects on one thread.
+  samrl::TwinActor actor(std::make_shared<const sim::Task>(twin), *robot, look, true, {}, {}, once,
+                         options.workers > 1 ? 1 : 0);
   RealityEvalOptions o;
   o.levels = {options.level};
   o.trials = options.episodes;

@@ -1,12 +1,16 @@
 #include "samrl/pose_estimate.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <map>
 #include <optional>
 #include <unordered_map>
 
+#include <spdlog/spdlog.h>
+
 #include "core/error.h"
+#include "core/thread_pool.h"
 #include "real2sim/mesh.h"
 #include "sim/camera.h"
 #include "sim/geom_scene.h"
@@ -55,8 +59,11 @@ struct ObjectPoseEstimator::Model {
 
 ObjectPoseEstimator::ObjectPoseEstimator(std::shared_ptr<const sim::Task> twin,
                                          const std::vector<std::string>& bodies,
-                                         const PoseEstimateOptions& options)
-    : options_(options), twin_(std::move(twin)), env_(twin_) {
+                                         const PoseEstimateOptions& options, int threads)
+    : options_(options),
+      twin_(std::move(twin)),
+      env_(twin_),
+      pool_(std::make_unique<core::ThreadPool>(threads > 0 ? threads : core::DefaultThreadCount())) {
   env_.Reset(0, 0);
   const mjModel* m = env_.model();
   for (const std::string& name : bodies) {
@@ -182,6 +189,17 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model,
     sum += p;
     ++n;
   }
+  std::vector<core::Pose> starts;
+  for (const auto& [cell, sum_n] : cells) {
+    if (sum_n.second < options_.min_cell_points) continue;
+    const Eigen::Vector3d centroid = sum_n.first / sum_n.second;
+    for (int k = 0; k < options_.yaw_starts; ++k) {
+      core::Pose pose = model.nominal;
+      pose.rotation = core::Yaw(2 * M_PI * k / options_.yaw_starts) * model.nominal.rotation;
+      pose.translation.head<2>() = centroid.head<2>();
+      starts.push_back(pose);
+    }
+  }
   // The points bucketed on the table's plane, so that a pose's neighbourhood is looked for in the
   // buckets it can reach only: a point within the outline (radius r) and height range (|z| <= h)
   // of a pose is within sqrt(r^2 + h^2) of its origin, whatever its tilt. The candidates are
@@ -196,7 +214,6 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model,
   const auto key = [](int64_t x, int64_t y) { return (x << 32) ^ (y & 0xffffffff); };
   for (std::size_t i = 0; i < points.size(); ++i)
     buckets[key(bucket_of(points[i].x()), bucket_of(points[i].y()))].push_back(int(i));
-  std::vector<int> candidates;
   // The points near a pose, in the body's frame: within its outline and height, with margin.
   const auto near = [&](const core::Pose& pose, double margin, std::vector<Eigen::Vector3d>& local,
                         std::vector<int>& index) {
@@ -205,7 +222,7 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model,
     const core::Pose inv = pose.Inverse();
     const double reach = extent(margin);
     const Eigen::Vector3d& t = pose.translation;
-    candidates.clear();
+    std::vector<int> candidates;
     for (int64_t x = bucket_of(t.x() - reach); x <= bucket_of(t.x() + reach); ++x)
       for (int64_t y = bucket_of(t.y() - reach); y <= bucket_of(t.y() + reach); ++y) {
         const auto it = buckets.find(key(x, y));
@@ -222,75 +239,82 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model,
       index.push_back(int(i));
     }
   };
-  std::vector<Eigen::Vector3d> local;
-  std::vector<int> index;
-  double best_score = -1e300;
-  for (const auto& [cell, sum_n] : cells) {
-    if (sum_n.second < options_.min_cell_points) continue;
-    const Eigen::Vector3d centroid = sum_n.first / sum_n.second;
-    for (int k = 0; k < options_.yaw_starts; ++k) {
-      core::Pose pose = model.nominal;
-      pose.rotation = core::Yaw(2 * M_PI * k / options_.yaw_starts) * model.nominal.rotation;
-      pose.translation.head<2>() = centroid.head<2>();
-      for (int it = 0; it < options_.iterations; ++it) {
-        const double t = options_.iterations > 1 ? double(it) / (options_.iterations - 1) : 1.0;
-        const double reach =
-            options_.start_reach * std::pow(options_.reach / options_.start_reach, t);
-        near(pose, reach, local, index);
-        if (local.empty()) break;
-        const std::vector<Eigen::Vector3d> closest = model.surface->Closest(local, 1);
-        // Planar Procrustes: the yaw and shift (about z, in the base frame) that move the model's
-        // closest points onto the measured ones.
-        std::vector<std::pair<Eigen::Vector2d, Eigen::Vector2d>> pairs;
-        for (std::size_t i = 0; i < local.size(); ++i) {
-          const Eigen::Vector3d& on = closest[i];
-          if ((on - local[i]).norm() > reach) continue;
-          pairs.emplace_back((pose * on).head<2>(), points[index[i]].head<2>());
-        }
-        if (pairs.size() < 3) break;
-        Eigen::Vector2d ms = Eigen::Vector2d::Zero(), mp = Eigen::Vector2d::Zero();
-        for (const auto& [s, p] : pairs) {
-          ms += s;
-          mp += p;
-        }
-        ms /= double(pairs.size());
-        mp /= double(pairs.size());
-        double sin_sum = 0, cos_sum = 0;
-        for (const auto& [s, p] : pairs) {
-          const Eigen::Vector2d a = s - ms, b = p - mp;
-          cos_sum += a.dot(b);
-          sin_sum += a.x() * b.y() - a.y() * b.x();
-        }
-        const double turn = std::atan2(sin_sum, cos_sum);
-        const Eigen::Rotation2Dd r(turn);
-        const Eigen::Vector2d shift = mp - r * ms;
-        pose.rotation = core::Yaw(turn) * pose.rotation;
-        pose.translation.head<2>() = r * pose.translation.head<2>() + shift;
-        if (std::abs(turn) < 1e-6 && shift.norm() < 1e-6) break;
-      }
-      // Score: points the surface explains, less the points inside its outline it does not.
-      near(pose, options_.reach, local, index);
-      if (local.empty()) continue;
+  // Each start annealed on its own (spread over the pool: a start's result depends on the start
+  // only, so the fit is the same whatever the thread count), then scored.
+  struct Result {
+    core::Pose pose;
+    bool scored = false;
+    int inliers = 0, outliers = 0;
+    double squares = 0;
+  };
+  std::vector<Result> results(starts.size());
+  pool_->ParallelFor(int64_t(starts.size()), [&](int64_t start) {
+    std::vector<Eigen::Vector3d> local;
+    std::vector<int> index;
+    core::Pose pose = starts[start];
+    for (int it = 0; it < options_.iterations; ++it) {
+      const double t = options_.iterations > 1 ? double(it) / (options_.iterations - 1) : 1.0;
+      const double reach = options_.start_reach * std::pow(options_.reach / options_.start_reach, t);
+      near(pose, reach, local, index);
+      if (local.empty()) break;
       const std::vector<Eigen::Vector3d> closest = model.surface->Closest(local, 1);
-      int inliers = 0, outliers = 0;
-      double squares = 0;
+      // Planar Procrustes: the yaw and shift (about z, in the base frame) that move the model's
+      // closest points onto the measured ones.
+      std::vector<std::pair<Eigen::Vector2d, Eigen::Vector2d>> pairs;
       for (std::size_t i = 0; i < local.size(); ++i) {
-        const double e = (closest[i] - local[i]).norm();
-        if (e <= options_.inlier) {
-          ++inliers;
-          squares += e * e;
-        } else if (e > options_.reach) {
-          ++outliers;
-        }
+        const Eigen::Vector3d& on = closest[i];
+        if ((on - local[i]).norm() > reach) continue;
+        pairs.emplace_back((pose * on).head<2>(), points[index[i]].head<2>());
       }
-      const double score = inliers - outliers;
-      if (score > best_score) {
-        best_score = score;
-        best.pose = pose;
-        best.inliers = inliers;
-        best.outliers = outliers;
-        best.rms = inliers ? std::sqrt(squares / inliers) : 0;
+      if (pairs.size() < 3) break;
+      Eigen::Vector2d ms = Eigen::Vector2d::Zero(), mp = Eigen::Vector2d::Zero();
+      for (const auto& [s, p] : pairs) {
+        ms += s;
+        mp += p;
       }
+      ms /= double(pairs.size());
+      mp /= double(pairs.size());
+      double sin_sum = 0, cos_sum = 0;
+      for (const auto& [s, p] : pairs) {
+        const Eigen::Vector2d a = s - ms, b = p - mp;
+        cos_sum += a.dot(b);
+        sin_sum += a.x() * b.y() - a.y() * b.x();
+      }
+      const double turn = std::atan2(sin_sum, cos_sum);
+      const Eigen::Rotation2Dd r(turn);
+      const Eigen::Vector2d shift = mp - r * ms;
+      pose.rotation = core::Yaw(turn) * pose.rotation;
+      pose.translation.head<2>() = r * pose.translation.head<2>() + shift;
+      if (std::abs(turn) < 1e-6 && shift.norm() < 1e-6) break;
+    }
+    // Score: points the surface explains, less the points inside its outline it does not.
+    Result& result = results[start];
+    result.pose = pose;
+    near(pose, options_.reach, local, index);
+    if (local.empty()) return;
+    const std::vector<Eigen::Vector3d> closest = model.surface->Closest(local, 1);
+    result.scored = true;
+    for (std::size_t i = 0; i < local.size(); ++i) {
+      const double e = (closest[i] - local[i]).norm();
+      if (e <= options_.inlier) {
+        ++result.inliers;
+        result.squares += e * e;
+      } else if (e > options_.reach) {
+        ++result.outliers;
+      }
+    }
+  });
+  // The best score; of equal ones, the first start.
+  double best_score = -1e300;
+  for (const Result& result : results) {
+    if (!result.scored) continue;
+    const double score = result.inliers - result.outliers;
+    if (score > best_score) {
+      best_score = score;
+      best.pose = result.pose;
+      best.inliers = result.inliers;
+      best.outliers = result.outliers;
+      best.rms = result.inliers ? std::sqrt(result.squares / result.inliers) : 0;
     }
   }
   best.seen = best.inliers >= options_.min_points;
@@ -320,7 +344,11 @@ std::vector<ObjectPose> ObjectPoseEstimator::Estimate(
     ObjectPose picked;
     for (std::size_t i = 0; i < models_.size(); ++i) {
       if (done[i]) continue;
+      const auto start = std::chrono::steady_clock::now();
       ObjectPose fit = Fit(*models_[i], points);
+      spdlog::debug("pose estimate: {} fitted to {} points in {:.2f} s", models_[i]->body,
+                    points.size(),
+                    std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
       if (pick < 0 || fit.inliers - fit.outliers > picked.inliers - picked.outliers) {
         pick = int(i);
         picked = fit;

@@ -17,6 +17,10 @@
 #include "reality/robot.h"
 #include "sim/env.h"
 
+namespace twinforge::core {
+class ThreadPool;
+}  // namespace twinforge::core
+
 namespace twinforge::samrl {
 
 struct PoseEstimateOptions {
@@ -78,9 +82,10 @@ std::vector<Eigen::Vector3d> FramePoints(const reality::RgbdFrame& frame,
 class ObjectPoseEstimator {
  public:
   // The twin task's bodies to estimate (its movable objects). Throws core::Error naming a body the
-  // twin does not have or one with no visible geometry.
+  // twin does not have or one with no visible geometry. `threads` fit the starts of an object
+  // (0: the machine's cores); the estimates do not depend on it.
   ObjectPoseEstimator(std::shared_ptr<const sim::Task> twin, const std::vector<std::string>& bodies,
-                      const PoseEstimateOptions& options = {});
+                      const PoseEstimateOptions& options = {}, int threads = 0);
   ~ObjectPoseEstimator();
 
   // The points of a frame the twin's fixed geometry does not explain, inside the task's
@@ -115,6 +120,7 @@ class ObjectPoseEstimator {
   std::shared_ptr<const sim::Task> twin_;
   sim::Env env_;
   std::vector<std::unique_ptr<Model>> models_;
+  std::unique_ptr<core::ThreadPool> pool_;
   std::vector<int> object_geoms_;  // geoms of the estimated bodies (not background)
 };
 

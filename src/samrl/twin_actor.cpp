@@ -83,7 +83,8 @@ sim::CameraIntrinsics ScaleIntrinsics(sim::CameraIntrinsics k, int scale) {
 
 TwinActor::TwinActor(std::shared_ptr<const sim::Task> twin, reality::Robot& robot, Look look,
                      bool oracle, const PoseEstimateOptions& options,
-                     const core::Pose& camera_correction, const RelookOptions& relook)
+                     const core::Pose& camera_correction, const RelookOptions& relook,
+                     int threads)
     : task_(twin),
       robot_(robot),
       look_(std::move(look)),
@@ -91,7 +92,7 @@ TwinActor::TwinActor(std::shared_ptr<const sim::Task> twin, reality::Robot& robo
       camera_correction_(camera_correction),
       env_(twin),
       expert_(*twin),
-      estimator_(twin, twin->spec().objects, options),
+      estimator_(twin, twin->spec().objects, options, threads),
       relook_(relook) {
   for (const auto& name : twin->spec().objects)
     bodies_.push_back(mj_name2id(env_.model(), mjOBJ_BODY, name.c_str()));

@@ -76,9 +76,10 @@ class TwinActor : public reality::Operator {
  public:
   // `twin`: the twin task (its objects are estimated, its expert acts). `oracle`: ask the robot
   // whether the task is done after each step (the proxy's success oracle) and stop there.
+  // `threads`: the pose estimate's (0: the machine's cores; its results do not depend on it).
   TwinActor(std::shared_ptr<const sim::Task> twin, reality::Robot& robot, Look look, bool oracle,
             const PoseEstimateOptions& options = {}, const core::Pose& camera_correction = {},
-            const RelookOptions& relook = {});
+            const RelookOptions& relook = {}, int threads = 0);
 
   // Before each trial: the expert starts over and the scene is looked at again.
   void Begin(uint64_t seed);
