@@ -1,13 +1,13 @@
 #include "samrl/pose_estimate.h"
 
+#include <spdlog/spdlog.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <map>
 #include <optional>
 #include <unordered_map>
-
-#include <spdlog/spdlog.h>
 
 #include "core/error.h"
 #include "core/thread_pool.h"
@@ -63,7 +63,8 @@ ObjectPoseEstimator::ObjectPoseEstimator(std::shared_ptr<const sim::Task> twin,
     : options_(options),
       twin_(std::move(twin)),
       env_(twin_),
-      pool_(std::make_unique<core::ThreadPool>(threads > 0 ? threads : core::DefaultThreadCount())) {
+      pool_(
+          std::make_unique<core::ThreadPool>(threads > 0 ? threads : core::DefaultThreadCount())) {
   env_.Reset(0, 0);
   const mjModel* m = env_.model();
   for (const std::string& name : bodies) {
@@ -254,7 +255,8 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model,
     core::Pose pose = starts[start];
     for (int it = 0; it < options_.iterations; ++it) {
       const double t = options_.iterations > 1 ? double(it) / (options_.iterations - 1) : 1.0;
-      const double reach = options_.start_reach * std::pow(options_.reach / options_.start_reach, t);
+      const double reach =
+          options_.start_reach * std::pow(options_.reach / options_.start_reach, t);
       near(pose, reach, local, index);
       if (local.empty()) break;
       const std::vector<Eigen::Vector3d> closest = model.surface->Closest(local, 1);
@@ -346,9 +348,9 @@ std::vector<ObjectPose> ObjectPoseEstimator::Estimate(
       if (done[i]) continue;
       const auto start = std::chrono::steady_clock::now();
       ObjectPose fit = Fit(*models_[i], points);
-      spdlog::debug("pose estimate: {} fitted to {} points in {:.2f} s", models_[i]->body,
-                    points.size(),
-                    std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+      spdlog::debug(
+          "pose estimate: {} fitted to {} points in {:.2f} s", models_[i]->body, points.size(),
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
       if (pick < 0 || fit.inliers - fit.outliers > picked.inliers - picked.outliers) {
         pick = int(i);
         picked = fit;

@@ -83,8 +83,7 @@ sim::CameraIntrinsics ScaleIntrinsics(sim::CameraIntrinsics k, int scale) {
 
 TwinActor::TwinActor(std::shared_ptr<const sim::Task> twin, reality::Robot& robot, Look look,
                      bool oracle, const PoseEstimateOptions& options,
-                     const core::Pose& camera_correction, const RelookOptions& relook,
-                     int threads)
+                     const core::Pose& camera_correction, const RelookOptions& relook, int threads)
     : task_(twin),
       robot_(robot),
       look_(std::move(look)),
