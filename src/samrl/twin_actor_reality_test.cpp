@@ -133,6 +133,7 @@ TEST(TwinActorOnReality, CarriesTheSpatulaAndMeasuresHowFarItsBladeReaches) {
   Scene scene("spatula_flipping");
   RelookOptions relook;
   relook.measure_reach = true;
+  relook.max_looks = 1;  // the scene once, then the spatula in the hand (not counted)
   TwinActor actor(
       scene.task, scene.proxy,
       FixedLook(scene.proxy, scene.camera.pose, ScaleIntrinsics(scene.camera.intrinsics, 8)), true,
