@@ -53,13 +53,22 @@ std::shared_ptr<const sim::Task> LoadTrainTask(const std::string& task, const st
   return std::make_shared<const sim::Task>(std::move(spec));
 }
 
+// --controller, for the stages that train in the twin: see LoadTrainTask.
+void AddControllerOption(CLI::App& c, std::string& controller) {
+  c.add_option("--controller", controller,
+               "a task.yaml sysid wrote (`sysid --out DIR`: DIR/task.yaml): the twin's arm "
+               "follows its commands through the controller identified there (latency, servo "
+               "interpolation, gains), as the real arm does")
+      ->check(CLI::ExistingFile);
+}
+
 struct InverseDistillCli {
-  std::string policy, task, twin, out;
+  std::string policy, task, twin, controller, out;
   learn::InverseDistillOptions options;
 };
 
 struct RlCli {
-  std::string task, twin, demos, out;
+  std::string task, twin, controller, demos, out;
   bool fresh = false;
   learn::PpoOptions options;
 };
@@ -89,6 +98,7 @@ void AddInverseDistill(CLI::App& train, int& exit_code) {
   c->add_option("--twin", cli->twin,
                 "twin directory (`twin build --out`); default: the task's "
                 "own scene");
+  AddControllerOption(*c, cli->controller);
   c->add_option("--n", cli->options.successes, "successful episodes to keep")
       ->check(CLI::PositiveNumber);
   c->add_option("--max-episodes", cli->options.rollout.episodes, "budget of attempts")
@@ -104,7 +114,7 @@ void AddInverseDistill(CLI::App& train, int& exit_code) {
       ->check(CLI::PositiveNumber);
   c->add_option("--out", cli->out, "sim demos HDF5 to write (must not exist)")->required();
   c->callback([cli, &exit_code] {
-    auto task = LoadTrainTask(cli->task, cli->twin);
+    auto task = LoadTrainTask(cli->task, cli->twin, cli->controller);
     core::Progress progress("inverse distillation", cli->options.successes, "demos");
     const learn::InverseDistillReport r =
         cli->policy == "expert"
@@ -213,6 +223,15 @@ void AddRl(CLI::App& train, int& exit_code) {
   c->add_option("--critic-warmup", o.critic_warmup,
                 "first iterations that train the value network alone")
       ->check(CLI::NonNegativeNumber);
+  c->add_option("--init", o.init_policy,
+                "start from this state policy (train imitate's actor) instead of BC pretraining; "
+                "its observation normalization is kept")
+      ->check(CLI::ExistingFile);
+  c->add_option("--init-std", o.init_std,
+                "with --init: the actions' starting standard deviation, in units of the per-step "
+                "limits")
+      ->check(CLI::Range(1e-4, 1.0));
+  AddControllerOption(*c, cli->controller);
   c->add_option("--lr", o.learning_rate, "Adam learning rate")->check(CLI::Range(1e-6, 1.0));
   c->add_option("--target", o.target_success, "stop at this evaluation success rate")
       ->check(CLI::Range(0.0, 1.0));
@@ -228,7 +247,7 @@ void AddRl(CLI::App& train, int& exit_code) {
   c->add_option("--iterations", o.max_iterations, "iteration budget (0: none)");
   c->add_flag("--fresh", cli->fresh, "discard an existing checkpoint");
   c->callback([cli, &exit_code] {
-    auto task = LoadTrainTask(cli->task, cli->twin);
+    auto task = LoadTrainTask(cli->task, cli->twin, cli->controller);
     const std::string demos = cli->demos == "none" ? "" : cli->demos;
     if (!demos.empty() && !std::filesystem::exists(demos))
       throw core::IoError("--demos: no file " + demos + " (use --demos none for PPO from scratch)");
@@ -293,11 +312,7 @@ void AddImitate(CLI::App& train, int& exit_code) {
   c->add_option("--task", cli->task, "task name (the twin's) or task.yaml")->required();
   c->add_option("--twin", cli->twin,
                 "twin directory (`twin build --out`); default: the task's own");
-  c->add_option("--controller", cli->controller,
-                "a task.yaml sysid wrote (`sysid --out DIR`: DIR/task.yaml): the twin's arm "
-                "follows its commands through the controller identified there (latency, servo "
-                "interpolation, gains), as the real arm does")
-      ->check(CLI::ExistingFile);
+  AddControllerOption(*c, cli->controller);
   c->add_option("--out", cli->out, "policy file to write; its curve goes beside it (.curve.csv)")
       ->required();
   c->add_option("--rounds", o.rounds, "rounds: episodes, then training and evaluation")

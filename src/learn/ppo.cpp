@@ -138,7 +138,8 @@ void WriteCurve(const std::vector<CurveRow>& rows, const std::filesystem::path& 
 nlohmann::json Fingerprint(nlohmann::json options) {
   for (const char* k : {"threads", "max_seconds", "max_env_steps", "max_iterations",
                         "target_success", "eval_every", "eval_episodes", "eval_seed", "eval_sample",
-                        "demos"})  // a file's path, which checkpoints before stop 28 held
+                        "demos",         // a file's path, which checkpoints before stop 28 held
+                        "init_policy"})  // its path: its content is fingerprinted
     options.erase(k);
   return options;
 }
@@ -157,6 +158,8 @@ nlohmann::json Fingerprint(const PpoOptions& options, const sim::Task& task,
   // What the demos file holds, not where it is: demos remade under the same name are other
   // demos, and a run directory moved or copied elsewhere keeps its teacher's checkpoint.
   j["demos_content"] = demos.empty() ? "" : core::Fingerprint().AddFile(demos).Hex();
+  if (!options.init_policy.empty())
+    j["init_content"] = core::Fingerprint().AddFile(options.init_policy).Hex();
   return j;
 }
 
@@ -339,6 +342,34 @@ double PretrainOnDemos(PolicyNet& policy, const DemoSteps& demos, RunningNorm& n
                            std::to_string(options.bc_pretrain_steps));
   }
   return tail_n ? tail / tail_n : NAN;
+}
+
+// Starts `policy` from the state policy in `options.init_policy` (its weights and normalization,
+// which `norm` takes over; see PpoOptions). Throws Error naming the file when it does not fit.
+void InitFromPolicy(PolicyNet& policy, RunningNorm& norm, const PpoOptions& options) {
+  const std::string& path = options.init_policy;
+  PolicyNet from = LoadPolicy(path);
+  const PolicyConfig& a = from->config();
+  const PolicyConfig& b = policy->config();
+  if (a.point_features != 0 || a.proprio_dim != b.proprio_dim || a.action_dim != b.action_dim ||
+      a.discrete != b.discrete || a.hidden != b.hidden || a.action_scale != b.action_scale)
+    throw core::Error(path + ": not a state policy of this task with " + std::to_string(b.hidden) +
+                      "-wide layers (reads " + std::to_string(a.proprio_dim) + " values, " +
+                      (a.point_features ? "points, " : "") + "acts in " +
+                      std::to_string(a.action_dim) + "; this task's state has " +
+                      std::to_string(b.proprio_dim) + ", its actions " +
+                      std::to_string(b.action_dim) + ")");
+  torch::NoGradGuard no_grad;
+  const auto source = from->named_parameters(true);
+  for (auto& item : policy->named_parameters(true)) item.value().copy_(source[item.key()]);
+  const auto buffers = from->named_buffers(true);
+  for (auto& item : policy->named_buffers(true)) item.value().copy_(buffers[item.key()]);
+  if (!b.discrete) policy->log_std.copy_((options.init_std * policy->ActionScale()).log());
+  for (std::size_t k = 0; k < norm.mean.size(); ++k) {
+    norm.mean[k] = policy->obs_mean[k].item<double>();
+    const double sd = policy->obs_std[k].item<double>();
+    norm.var[k] = sd * sd - 1e-8;
+  }
 }
 
 torch::nn::Sequential ValueNet(int in, int hidden) {
@@ -554,6 +585,21 @@ PpoReport TrainPpo(std::shared_ptr<const sim::Task> task, const std::filesystem:
     SaveCheckpoint(report.checkpoint, model, norm, return_norm, state);
   };
 
+  const bool from_policy = !options.init_policy.empty();
+  if (!stored_checkpoint && from_policy) {
+    CurveRow row;  // iteration 0: the policy PPO starts from
+    InitFromPolicy(policy, norm, options);
+    row.eval_success = report.pretrain_eval_success =
+        EvaluatePolicy(policy, task, eval_options).success_rate();
+    report.best_eval_success = row.eval_success;
+    SavePolicy(policy, out);
+    row.seconds = elapsed();
+    rows.push_back(row);
+    commit();
+    spdlog::info("rl: starting from {}: evaluation success {:.2f}", options.init_policy,
+                 row.eval_success);
+    if (row.eval_success >= options.target_success) report.stopped_by = "target";
+  }
   if (!stored_checkpoint && use_demos && options.bc_pretrain_steps > 0) {
     CurveRow row;  // iteration 0: the imitation PPO starts from
     row.bc_loss = report.pretrain_bc_loss = PretrainOnDemos(policy, demo, norm, options, progress);
@@ -679,7 +725,7 @@ PpoReport TrainPpo(std::shared_ptr<const sim::Task> task, const std::filesystem:
       }
     }
     const double update_seconds = SecondsSince(update_start);
-    norm.Update(raw.view({samples, state_dim}));
+    if (!from_policy) norm.Update(raw.view({samples, state_dim}));
     return_norm.Update(discounted.view({samples, 1}));
     row.iteration = iteration;
     row.env_steps = env_steps;

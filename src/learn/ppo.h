@@ -40,6 +40,13 @@ struct PpoOptions {
   int bc_pretrain_steps = 0;
   int bc_pretrain_batch = 256;
   int critic_warmup = 0;
+  // Or PPO fine-tunes a state policy trained elsewhere (`train imitate`'s actor), from its
+  // weights and its observation normalization, which stays fixed: the weights were fitted to it
+  // (imitation floors a still component's spread that PPO's running statistics would shrink).
+  // Its continuous actions are sampled with `init_std` times the per-step limits at first (the
+  // imitation's own noise; PPO's default start, half the limits, would undo a fine policy).
+  std::string init_policy;
+  double init_std = 0.02;
   // Stopping: success over eval_episodes (their own seeds) every eval_every iterations reaching
   // target_success, or a budget (0: none). The policy is evaluated as PPO trains it, sampling its
   // moves (eval_sample); greedy (the most likely move) gets stuck in loops of near-tied moves
@@ -75,6 +82,8 @@ struct PpoOptions {
     a("bc_pretrain_steps", bc_pretrain_steps);
     a("bc_pretrain_batch", bc_pretrain_batch);
     a("critic_warmup", critic_warmup);
+    a("init_policy", init_policy);
+    a("init_std", init_std);
     a("target_success", target_success);
     a("eval_sample", eval_sample);
     a("eval_every", eval_every);
@@ -91,6 +100,9 @@ struct PpoOptions {
     a.Require(eval_every > 0 && eval_episodes > 0, "eval_every", "positive evaluation counts");
     a.Require(bc_pretrain_steps >= 0 && bc_pretrain_batch > 0 && critic_warmup >= 0,
               "bc_pretrain_steps", "non-negative pretraining and warm-up counts");
+    a.Require(init_policy.empty() || bc_pretrain_steps == 0, "init_policy",
+              "either a policy to start from or BC pretraining, not both");
+    a.Require(init_std > 0, "init_std", "a positive standard deviation");
   }
 };
 
@@ -108,7 +120,7 @@ struct PpoReport {
   double matmul_peak_gflops = 0, update_share_of_matmul_peak = 0;
   int demo_steps = 0;
   double pretrain_bc_loss = NAN;       // BC pretraining's last loss (NaN: none this session)
-  double pretrain_eval_success = NAN;  // success of the pretrained policy, before any PPO
+  double pretrain_eval_success = NAN;  // success of the pretrained (or --init) policy, before PPO
   std::filesystem::path curve_csv, curve_svg, checkpoint;
 };
 

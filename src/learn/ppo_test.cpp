@@ -312,6 +312,50 @@ TEST(Ppo, PretrainingOnDemosStartsPpoFromTheirImitation) {
   EXPECT_EQ(again.stopped_by, "target");
 }
 
+// PPO fine-tunes a policy trained elsewhere (`train rl --init`): it starts from the policy's own
+// success (same weights, same normalization), raises it, and keeps the normalization the weights
+// were fitted to. A policy of another shape is refused by name.
+TEST(Ppo, FineTunesAPolicyFromItsWeightsAndNormalization) {
+  PinMathThreads(1);
+  auto task = testing::ReachTask();
+  const auto dir = core::testing::TestDir("ppo_test", "init");
+  InverseDistillOptions d;
+  d.rollout.episodes = 60;
+  d.rollout.threads = 2;
+  d.successes = 20;
+  std::filesystem::remove(dir / "expert.hdf5");
+  ASSERT_EQ(ExpertDemos(task, d, dir / "expert.hdf5").successes, 20);
+  PpoOptions o = SmallOptions();
+  o.bc_pretrain_steps = 100;
+  o.max_iterations = 1;
+  o.critic_warmup = 1;  // the file is the imitation alone
+  o.target_success = 1.01;
+  TrainPpo(task, dir / "expert.hdf5", dir / "imitation.pt", o, CheckpointMode::kStartOver);
+
+  PpoOptions f = SmallOptions();
+  f.init_policy = (dir / "imitation.pt").string();
+  f.critic_warmup = 1;
+  f.max_iterations = 10;
+  f.target_success = 1.01;
+  const double start = EvaluatePolicy(dir / "imitation.pt", task, EvalOptionsOf(f)).success_rate();
+  const PpoReport r = TrainPpo(task, "", dir / "tuned.pt", f, CheckpointMode::kStartOver);
+  EXPECT_DOUBLE_EQ(r.pretrain_eval_success, start);
+  EXPECT_LT(start, 0.9);
+  EXPECT_GT(r.best_eval_success, start + 0.1);
+  PolicyNet imitation = LoadPolicy(dir / "imitation.pt"), tuned = LoadPolicy(dir / "tuned.pt");
+  EXPECT_TRUE(torch::allclose(imitation->obs_mean, tuned->obs_mean, 1e-6, 1e-7));
+  EXPECT_TRUE(torch::allclose(imitation->obs_std, tuned->obs_std, 1e-6, 1e-7));
+
+  PpoOptions wide = f;
+  wide.hidden = 64;
+  try {
+    TrainPpo(task, "", dir / "wide.pt", wide, CheckpointMode::kStartOver);
+    ADD_FAILURE() << "a 256-wide policy started a 64-wide run";
+  } catch (const core::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("imitation.pt"), std::string::npos) << e.what();
+  }
+}
+
 // The critic's warm-up steps the value network and leaves the policy exactly as it was.
 TEST(Ppo, AValueOnlyMinibatchLeavesThePolicyUnchanged) {
   PinMathThreads(1);
