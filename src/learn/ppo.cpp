@@ -585,10 +585,17 @@ PpoReport TrainPpo(std::shared_ptr<const sim::Task> task, const std::filesystem:
     SaveCheckpoint(report.checkpoint, model, norm, return_norm, state);
   };
 
+  // Iteration 0, when PPO starts from a policy (another run's, or BC's on the demos): its own
+  // evaluation, as the first row and the best so far.
   const bool from_policy = !options.init_policy.empty();
-  if (!stored_checkpoint && from_policy) {
-    CurveRow row;  // iteration 0: the policy PPO starts from
-    InitFromPolicy(policy, norm, options);
+  const bool pretrain = use_demos && options.bc_pretrain_steps > 0;
+  if (!stored_checkpoint && (from_policy || pretrain)) {
+    CurveRow row;
+    if (from_policy)
+      InitFromPolicy(policy, norm, options);
+    else
+      row.bc_loss = report.pretrain_bc_loss =
+          PretrainOnDemos(policy, demo, norm, options, progress);
     row.eval_success = report.pretrain_eval_success =
         EvaluatePolicy(policy, task, eval_options).success_rate();
     report.best_eval_success = row.eval_success;
@@ -596,22 +603,12 @@ PpoReport TrainPpo(std::shared_ptr<const sim::Task> task, const std::filesystem:
     row.seconds = elapsed();
     rows.push_back(row);
     commit();
-    spdlog::info("rl: starting from {}: evaluation success {:.2f}", options.init_policy,
-                 row.eval_success);
-    if (row.eval_success >= options.target_success) report.stopped_by = "target";
-  }
-  if (!stored_checkpoint && use_demos && options.bc_pretrain_steps > 0) {
-    CurveRow row;  // iteration 0: the imitation PPO starts from
-    row.bc_loss = report.pretrain_bc_loss = PretrainOnDemos(policy, demo, norm, options, progress);
-    row.eval_success = report.pretrain_eval_success =
-        EvaluatePolicy(policy, task, eval_options).success_rate();
-    report.best_eval_success = row.eval_success;
-    SavePolicy(policy, out);
-    row.seconds = elapsed();
-    rows.push_back(row);
-    commit();
-    spdlog::info("rl: BC pretraining, {} steps: loss {:.3f}, evaluation success {:.2f}",
-                 options.bc_pretrain_steps, row.bc_loss, row.eval_success);
+    if (from_policy)
+      spdlog::info("rl: starting from {}: evaluation success {:.2f}", options.init_policy,
+                   row.eval_success);
+    else
+      spdlog::info("rl: BC pretraining, {} steps: loss {:.3f}, evaluation success {:.2f}",
+                   options.bc_pretrain_steps, row.bc_loss, row.eval_success);
     if (row.eval_success >= options.target_success) report.stopped_by = "target";
   }
 

@@ -267,6 +267,18 @@ TEST(Ppo, ACheckpointResumesWithTheSameDemosMovedElsewhere) {
   std::filesystem::remove_all(dir);
 }
 
+// 20 of the scripted expert's episodes on the tiny reach, as sim demos.
+std::filesystem::path ExpertDemosOfTheReach(const std::filesystem::path& dir) {
+  InverseDistillOptions d;
+  d.rollout.episodes = 60;
+  d.rollout.threads = 2;
+  d.successes = 20;
+  const std::filesystem::path out = dir / "expert.hdf5";
+  std::filesystem::remove(out);
+  EXPECT_EQ(ExpertDemos(testing::ReachTask(), d, out).successes, 20);
+  return out;
+}
+
 // BC alone before PPO: the imitation of the operator's demos succeeds where PPO's first iteration
 // without it does not. Its evaluation is the curve's row 0, and reaching the target there ends
 // the run before any rollout; resumed, it stays ended.
@@ -274,23 +286,16 @@ TEST(Ppo, PretrainingOnDemosStartsPpoFromTheirImitation) {
   PinMathThreads(1);
   auto task = testing::ReachTask();
   const auto dir = core::testing::TestDir("ppo_test", "pretrain");
-  InverseDistillOptions d;
-  d.rollout.episodes = 60;
-  d.rollout.threads = 2;
-  d.successes = 20;
-  std::filesystem::remove(dir / "expert.hdf5");
-  ASSERT_EQ(ExpertDemos(task, d, dir / "expert.hdf5").successes, 20);
+  const std::filesystem::path demos = ExpertDemosOfTheReach(dir);
 
   PpoOptions o = SmallOptions();
   o.max_iterations = 1;
   o.target_success = 1.01;
-  const PpoReport plain =
-      TrainPpo(task, dir / "expert.hdf5", dir / "plain.pt", o, CheckpointMode::kStartOver);
+  const PpoReport plain = TrainPpo(task, demos, dir / "plain.pt", o, CheckpointMode::kStartOver);
   EXPECT_TRUE(std::isnan(plain.pretrain_eval_success));
   o.bc_pretrain_steps = 400;
   o.critic_warmup = 1;
-  const PpoReport pre =
-      TrainPpo(task, dir / "expert.hdf5", dir / "pre.pt", o, CheckpointMode::kStartOver);
+  const PpoReport pre = TrainPpo(task, demos, dir / "pre.pt", o, CheckpointMode::kStartOver);
   EXPECT_LT(plain.best_eval_success, 0.3);
   EXPECT_GT(pre.pretrain_eval_success, 0.7) << "PPO alone: " << plain.best_eval_success;
   const auto rows = ReadCsv(pre.curve_csv);
@@ -300,13 +305,12 @@ TEST(Ppo, PretrainingOnDemosStartsPpoFromTheirImitation) {
   EXPECT_EQ(rows[2][7], "") << "no BC loss while the critic warms up alone";
 
   o.target_success = 0.6;
-  const PpoReport done =
-      TrainPpo(task, dir / "expert.hdf5", dir / "done.pt", o, CheckpointMode::kStartOver);
+  const PpoReport done = TrainPpo(task, demos, dir / "done.pt", o, CheckpointMode::kStartOver);
   EXPECT_EQ(done.stopped_by, "target");
   EXPECT_EQ(done.iterations, 0);
   EXPECT_DOUBLE_EQ(EvaluatePolicy(dir / "done.pt", task, EvalOptionsOf(o)).success_rate(),
                    done.best_eval_success);
-  const PpoReport again = TrainPpo(task, dir / "expert.hdf5", dir / "done.pt", o);
+  const PpoReport again = TrainPpo(task, demos, dir / "done.pt", o);
   EXPECT_EQ(again.resumed_from, 0);
   EXPECT_EQ(again.iterations, 0);
   EXPECT_EQ(again.stopped_by, "target");
@@ -319,18 +323,13 @@ TEST(Ppo, FineTunesAPolicyFromItsWeightsAndNormalization) {
   PinMathThreads(1);
   auto task = testing::ReachTask();
   const auto dir = core::testing::TestDir("ppo_test", "init");
-  InverseDistillOptions d;
-  d.rollout.episodes = 60;
-  d.rollout.threads = 2;
-  d.successes = 20;
-  std::filesystem::remove(dir / "expert.hdf5");
-  ASSERT_EQ(ExpertDemos(task, d, dir / "expert.hdf5").successes, 20);
+  const std::filesystem::path demos = ExpertDemosOfTheReach(dir);
   PpoOptions o = SmallOptions();
   o.bc_pretrain_steps = 100;
   o.max_iterations = 1;
   o.critic_warmup = 1;  // the file is the imitation alone
   o.target_success = 1.01;
-  TrainPpo(task, dir / "expert.hdf5", dir / "imitation.pt", o, CheckpointMode::kStartOver);
+  TrainPpo(task, demos, dir / "imitation.pt", o, CheckpointMode::kStartOver);
 
   PpoOptions f = SmallOptions();
   f.init_policy = (dir / "imitation.pt").string();
