@@ -77,8 +77,8 @@ TEST_F(RobotTest, IkMovesTheOtherJointsWhenOneIsAtItsLimit) {
   // Each joint in turn at either limit, the arm otherwise at home, asked for a small move. Where
   // the held joint would have to go past its limit, the six others must bring the tool closer
   // (the 6-d error, rotation weighted as the IK weighs it). Clamping the free step instead sent
-  // the tool away in 10 of these 58 cases, up to 9 times farther than the move asked; the
-  // spatula's blade stalled so on the proxy, turning.
+  // the tool away in 10 of these 58 cases, up to 9 times farther than the move asked (found
+  // looking into a stalled turn of the proxy spatula's blade, which it shortened, not cured).
   const auto& index = kinematics_.index();
   const IkOptions options;
   const std::vector<core::Pose> deltas = {{{0.02, 0, 0}, core::Quat::Identity()},
