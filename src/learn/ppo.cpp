@@ -447,6 +447,11 @@ PpoReport TrainPpo(std::shared_ptr<const sim::Task> task, const std::filesystem:
                    const std::filesystem::path& out, const PpoOptions& options,
                    CheckpointMode checkpoint, core::Progress* progress) {
   const auto session_start = Clock::now();
+  // Command-line options do not pass through the config reader's checks.
+  if (!options.init_policy.empty() && options.bc_pretrain_steps > 0)
+    throw core::ConfigError("train rl", "init_policy",
+                            "either a policy to start from (--init) or BC pretraining "
+                            "(--bc-pretrain-steps), not both");
   const sim::TaskSpec& spec = task->spec();
   const bool discrete = spec.control.action == sim::ActionMode::kDiscrete;
   const int state_dim = sim::StateDim(*task);

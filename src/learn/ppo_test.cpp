@@ -318,7 +318,7 @@ TEST(Ppo, PretrainingOnDemosStartsPpoFromTheirImitation) {
 
 // PPO fine-tunes a policy trained elsewhere (`train rl --init`): it starts from the policy's own
 // success (same weights, same normalization), raises it, and keeps the normalization the weights
-// were fitted to. A policy of another shape is refused by name.
+// were fitted to. Asked for BC pretraining too, or given a policy of another shape, it refuses.
 TEST(Ppo, FineTunesAPolicyFromItsWeightsAndNormalization) {
   PinMathThreads(1);
   auto task = testing::ReachTask();
@@ -345,6 +345,10 @@ TEST(Ppo, FineTunesAPolicyFromItsWeightsAndNormalization) {
   EXPECT_TRUE(torch::allclose(imitation->obs_mean, tuned->obs_mean, 1e-6, 1e-7));
   EXPECT_TRUE(torch::allclose(imitation->obs_std, tuned->obs_std, 1e-6, 1e-7));
 
+  PpoOptions both = f;
+  both.bc_pretrain_steps = 100;
+  EXPECT_THROW(TrainPpo(task, demos, dir / "both.pt", both, CheckpointMode::kStartOver),
+               core::ConfigError);
   PpoOptions wide = f;
   wide.hidden = 64;
   try {
