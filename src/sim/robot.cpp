@@ -106,29 +106,10 @@ ArmVector Kinematics::SolveIk(const ArmVector& q0, const core::Pose& target,
     Eigen::Matrix<double, 6, kArmDof> j = Jacobian(q);
     j.bottomRows<3>() *= options.rotation_weight;
     error.tail<3>() *= options.rotation_weight;
-    // The clamping loop (Baerlocher and Boulic 2004): a joint the step would carry past a limit
-    // is moved only to the limit and held there, and the rest of the step is solved again with
-    // the others. Clamping the whole step instead leaves the others moving as if that joint had
-    // gone on, which can stall the tool or send it the wrong way.
-    const Eigen::Matrix<double, 6, kArmDof> full = j;
-    ArmVector held_step = ArmVector::Zero(), dq;
-    for (int pass = 0; pass <= kArmDof; ++pass) {
-      const Eigen::Matrix<double, 6, 6> jjt =
-          j * j.transpose() +
-          options.damping * options.damping * Eigen::Matrix<double, 6, 6>::Identity();
-      const Eigen::Matrix<double, 6, 1> rest = error - full * held_step;
-      dq = j.transpose() * jjt.ldlt().solve(rest) + held_step;
-      bool held = false;
-      for (int k = 0; k < kArmDof; ++k) {
-        if (j.col(k).isZero()) continue;
-        const double to = std::clamp(q[k] + dq[k], lo[k], hi[k]);
-        if (to == q[k] + dq[k]) continue;
-        held_step[k] = to - q[k];
-        j.col(k).setZero();
-        held = true;
-      }
-      if (!held) break;
-    }
+    const Eigen::Matrix<double, 6, 6> jjt =
+        j * j.transpose() +
+        options.damping * options.damping * Eigen::Matrix<double, 6, 6>::Identity();
+    const ArmVector dq = j.transpose() * jjt.ldlt().solve(error);
     if (!dq.allFinite()) break;
     q = (q + dq).cwiseMax(lo).cwiseMin(hi);
   }
