@@ -267,16 +267,15 @@ TEST(Ppo, ACheckpointResumesWithTheSameDemosMovedElsewhere) {
   std::filesystem::remove_all(dir);
 }
 
-// 20 of the scripted expert's episodes on the tiny reach, as sim demos.
-std::filesystem::path ExpertDemosOfTheReach(const std::filesystem::path& dir) {
+// Writes 20 of the scripted expert's episodes on the tiny reach to `out`, as sim demos (it
+// stops there, within 60 attempts).
+InverseDistillReport WriteExpertDemosOfTheReach(const std::filesystem::path& out) {
   InverseDistillOptions d;
   d.rollout.episodes = 60;
   d.rollout.threads = 2;
   d.successes = 20;
-  const std::filesystem::path out = dir / "expert.hdf5";
   std::filesystem::remove(out);
-  EXPECT_EQ(ExpertDemos(testing::ReachTask(), d, out).successes, 20);
-  return out;
+  return ExpertDemos(testing::ReachTask(), d, out);
 }
 
 // BC alone before PPO: the imitation of the operator's demos succeeds where PPO's first iteration
@@ -286,7 +285,8 @@ TEST(Ppo, PretrainingOnDemosStartsPpoFromTheirImitation) {
   PinMathThreads(1);
   auto task = testing::ReachTask();
   const auto dir = core::testing::TestDir("ppo_test", "pretrain");
-  const std::filesystem::path demos = ExpertDemosOfTheReach(dir);
+  const std::filesystem::path demos = dir / "expert.hdf5";
+  ASSERT_EQ(WriteExpertDemosOfTheReach(demos).successes, 20);
 
   PpoOptions o = SmallOptions();
   o.max_iterations = 1;
@@ -323,7 +323,8 @@ TEST(Ppo, FineTunesAPolicyFromItsWeightsAndNormalization) {
   PinMathThreads(1);
   auto task = testing::ReachTask();
   const auto dir = core::testing::TestDir("ppo_test", "init");
-  const std::filesystem::path demos = ExpertDemosOfTheReach(dir);
+  const std::filesystem::path demos = dir / "expert.hdf5";
+  ASSERT_EQ(WriteExpertDemosOfTheReach(demos).successes, 20);
   PpoOptions o = SmallOptions();
   o.bc_pretrain_steps = 100;
   o.max_iterations = 1;
