@@ -1,7 +1,9 @@
 #include "sim/expert.h"
 
+#include <algorithm>
 #include <array>
 #include <cmath>
+#include <numbers>
 
 #include "core/error.h"
 #include "core/thread_pool.h"
@@ -54,6 +56,25 @@ struct MoveSearch {
   }
 };
 
+// A hole search (ExpertStep::search): an Archimedean spiral of kSpiralPitch between turns (less
+// than the 3 mm a peg with 1.5 mm clearance a side drops in from), walked kSpiralArc a step,
+// pressing down no more than kSearchPress below the carried site (pressed harder, friction holds
+// the peg where it stands, and it tips in the fingers). The site is blocked once it went down
+// less than kStallDrop in each of kStallSteps steps.
+constexpr double kSpiralPitch = 0.002, kSpiralArc = 0.0015, kSearchPress = 0.0015;
+constexpr double kStallDrop = 0.001;
+constexpr int kStallSteps = 2;
+
+// The n-th point (n >= 1) of the spiral in its plane, from its middle; past `radius` it starts
+// again from the middle.
+Eigen::Vector3d SpiralPoint(int n, double radius) {
+  const double b = kSpiralPitch / (2 * std::numbers::pi);  // r = b theta
+  const int points = std::max(1, int(radius * radius / (2 * kSpiralArc * b)));
+  n = (n - 1) % points + 1;
+  const double theta = std::sqrt(2 * n * kSpiralArc / b);  // arc length b theta^2 / 2
+  return {b * theta * std::cos(theta), b * theta * std::sin(theta), 0.0};
+}
+
 }  // namespace
 
 int RefiningMove(const core::Pose& goal, const ActionLimits& limits) {
@@ -71,25 +92,22 @@ int RefiningMove(const core::Pose& goal, const ActionLimits& limits) {
 
 ScriptedExpert::ScriptedExpert(const Task& task, double noise) : task_(task), noise_(noise) {}
 
-void ScriptedExpert::Reset() {
-  step_ = 0;
-  steps_in_step_ = 0;
-  last_move_ = -1;
-}
+void ScriptedExpert::Reset() { BeginStep(0); }
 
 void ScriptedExpert::Restart(int step) {
   if (step < 0 || step >= static_cast<int>(task_.spec().expert.steps.size()))
     throw core::Error(task_.spec().name + ": the expert has no step " + std::to_string(step));
+  BeginStep(step);
+}
+
+void ScriptedExpert::Advance() { BeginStep(step_ + 1); }
+
+void ScriptedExpert::BeginStep(int step) {
   step_ = step;
   steps_in_step_ = 0;
   last_move_ = -1;
   at_grid_target_ = false;
-}
-
-void ScriptedExpert::Advance() {
-  ++step_;
-  steps_in_step_ = 0;
-  last_move_ = -1;
+  stalled_ = spiral_ = 0;
 }
 
 core::Pose ScriptedExpert::Target(const Env& env, const ExpertStep& step) {
@@ -107,6 +125,17 @@ core::Pose ScriptedExpert::Target(const Env& env, const ExpertStep& step) {
   }
   core::Pose target;
   target.translation = anchor * Eigen::Vector3d(step.offset.data());
+  if (step.search > 0) {
+    // Blocked (the site stopped going down), the target walks the spiral a point a step; going
+    // down again (in the hole), it stays where the site dropped.
+    const double height = env.SitePose(ids.carry).translation.z();
+    if (!first) {
+      stalled_ = last_height_ - height < kStallDrop ? stalled_ + 1 : 0;
+      if (spiral_ > 0 ? stalled_ > 0 : stalled_ >= kStallSteps) ++spiral_;
+    }
+    last_height_ = height;
+    if (spiral_ > 0) target.translation += anchor.rotation * SpiralPoint(spiral_, step.search);
+  }
   if (step.keep_orientation) {
     if (first) kept_rotation_ = ee.rotation;
     target.rotation = kept_rotation_;
@@ -229,7 +258,10 @@ Action ScriptedExpert::Act(const Env& env, core::Rng& rng) {
         continue;
       }
       at_grid_target_ = false;
-      action = Toward(env, target, closure);
+      core::Pose aim = target;
+      if (spiral_ > 0 && stalled_ > 0)  // searching, still blocked: press gently
+        aim.translation.z() = std::max(aim.translation.z(), ee.translation.z() - kSearchPress);
+      action = Toward(env, aim, closure);
       if (at_grid_target_) {
         Advance();
         continue;

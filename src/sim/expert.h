@@ -40,6 +40,7 @@ class ScriptedExpert {
   Action Toward(const Env& env, const core::Pose& target, double closure);
   Action HoldStill(const Env& env) const;
   void Advance();
+  void BeginStep(int step);  // the step's own state cleared
 
   const Task& task_;
   double noise_;
@@ -53,6 +54,11 @@ class ScriptedExpert {
   int last_move_ = -1;           // discrete: the previous motion of this step
   core::Pose frozen_anchor_;     // steps anchored where they start (see freeze_anchor)
   core::Quat kept_rotation_;     // keep_orientation steps: the tool orientation at the start
+  // search steps: the carried site's height at the last step, the steps in a row it did not go
+  // down, and how far along the spiral the target is (0: not searching).
+  double last_height_ = 0;
+  int stalled_ = 0;
+  int spiral_ = 0;
 };
 
 // `action` with noise: a random move with probability `noise` (discrete), or Gaussian noise of

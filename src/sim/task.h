@@ -196,6 +196,11 @@ struct ExpertStep {
   // the scene again when this step is done; an object it does not hold found moved, it does the
   // step again toward where the object is now. The sim's expert reads the state and ignores it.
   bool look = false;
+  // move, with a carried site: a search for a hole the estimate missed by a few mm. When the
+  // carried site stops going down (a peg standing on the block's top beside its hole), the target
+  // walks a spiral in the anchor's plane out to this radius (m), pressing down gently, until the
+  // site drops (0: no search).
+  double search = 0;
   template <class A>
   void Serialize(A& a) {
     a.Enum("type", type,
@@ -225,6 +230,9 @@ struct ExpertStep {
     a("max_steps", max_steps);
     a("refine", refine);
     a("look", look);
+    a("search", search);
+    a.Require(search >= 0 && (search == 0 || !carry.empty()), "search",
+              "a non-negative radius in m, on a step that carries a site");
     a.Require(type != ExpertStepType::kDrive || !joint.empty(), "joint",
               "a joint name for a drive step");
     a.Require(type != ExpertStepType::kGrip || gripper != GripCommand::kKeep, "gripper",
