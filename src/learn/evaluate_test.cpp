@@ -102,7 +102,8 @@ TEST(InverseDistill, KeepsOnlySuccessfulEpisodesWithPrivilegedState) {
 
 // The twin's scripted operator as the source of sim demos: only its successes are kept, each
 // replays to success from its seed (the states to 1e-4), in the layout inverse distillation
-// writes (continuous actions here). Pushes at level 3 make it fail now and then.
+// writes (continuous actions here). Pushes at level 3 make it fail now and then (5 in 100 since
+// its search for the hole, stop 43; the first at episode 26 of these seeds).
 TEST(ExpertDemos, KeepOnlyTheOperatorsSuccessesAndReplay) {
   auto task = std::make_shared<const sim::Task>(sim::LoadTaskSpec("peg_insertion"));
   const auto dir = core::testing::TestDir("evaluate_test", "expert");
@@ -110,13 +111,13 @@ TEST(ExpertDemos, KeepOnlyTheOperatorsSuccessesAndReplay) {
   o.rollout.episodes = 40;
   o.rollout.level = 3;
   o.rollout.seed = 21;
-  o.successes = 8;
+  o.successes = 30;
   std::filesystem::remove(dir / "sim.hdf5");
   const InverseDistillReport r = ExpertDemos(task, o, dir / "sim.hdf5");
-  ASSERT_EQ(r.successes, 8);
+  ASSERT_EQ(r.successes, 30);
   EXPECT_GT(r.attempts, r.successes);  // failures were tried and dropped
   core::DatasetReader reader(dir / "sim.hdf5");
-  ASSERT_EQ(reader.demos().size(), 8u);
+  ASSERT_EQ(reader.demos().size(), 30u);
   EXPECT_EQ(reader.env_args()["action_mode"], "continuous");
   EXPECT_EQ(reader.env_args()["policy"], "scripted expert");
   for (const std::string& name : reader.demos()) {
