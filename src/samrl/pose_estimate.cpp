@@ -54,8 +54,18 @@ struct ObjectPoseEstimator::Model {
   std::optional<real2sim::SurfaceQuery> surface;
   double radius = 0;            // m: the farthest vertex from the body's z axis
   double z_min = 0, z_max = 0;  // m: body frame
-  int symmetry = 1;             // turns about z that look alike
+  Eigen::Vector2d lo, hi;       // m: the outline's box on the table, body frame
+  // Neither on nor under another of the objects in the twin (a pancake on its griddle): what is
+  // over its outline then speaks against a fit (a taller box of the clutter, whose lower part it
+  // explains).
+  bool alone = true;
+  int symmetry = 1;  // turns about z that look alike
 };
+
+namespace {
+// m above an object's top within which points over its outline count against a fit.
+constexpr double kOverHeight = 0.08;
+}  // namespace
 
 ObjectPoseEstimator::ObjectPoseEstimator(std::shared_ptr<const sim::Task> twin,
                                          const std::vector<std::string>& bodies,
@@ -84,6 +94,8 @@ ObjectPoseEstimator::ObjectPoseEstimator(std::shared_ptr<const sim::Task> twin,
       throw core::Error(twin_->spec().name + ": body " + name + " has no visible geometry");
     model->z_min = mesh.min().z();
     model->z_max = mesh.max().z();
+    model->lo = mesh.min().head<2>();
+    model->hi = mesh.max().head<2>();
     for (const auto& v : mesh.vertices) model->radius = std::max(model->radius, v.head<2>().norm());
     model->surface.emplace(mesh);
     for (int turns : {4, 2}) {
@@ -98,6 +110,14 @@ ObjectPoseEstimator::ObjectPoseEstimator(std::shared_ptr<const sim::Task> twin,
     }
     models_.push_back(std::move(model));
   }
+  const auto over = [](const Model& under, const Model& on) {
+    const Eigen::Vector3d at = under.nominal.Inverse() * on.nominal.translation;
+    return at.z() > under.z_min && (at.head<2>().array() >= under.lo.array()).all() &&
+           (at.head<2>().array() <= under.hi.array()).all();
+  };
+  for (auto& model : models_)
+    for (const auto& other : models_)
+      if (other != model && (over(*model, *other) || over(*other, *model))) model->alone = false;
   std::sort(object_geoms_.begin(), object_geoms_.end());
 }
 
@@ -304,6 +324,24 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model,
       } else if (e > options_.reach) {
         ++result.outliers;
       }
+    }
+    if (model.alone) {
+      // Points over its outline, above its top: something taller stands where it is fitted.
+      const double r = std::hypot(model.radius, model.z_max + kOverHeight);
+      const core::Pose inv = pose.Inverse();
+      const Eigen::Vector3d& t = pose.translation;
+      for (int64_t x = bucket_of(t.x() - r); x <= bucket_of(t.x() + r); ++x)
+        for (int64_t y = bucket_of(t.y() - r); y <= bucket_of(t.y() + r); ++y) {
+          const auto it = buckets.find(key(x, y));
+          if (it == buckets.end()) continue;
+          for (const int i : it->second) {
+            const Eigen::Vector3d b = inv * points[i];
+            if (b.z() > model.z_max + options_.reach && b.z() <= model.z_max + kOverHeight &&
+                (b.head<2>().array() >= model.lo.array()).all() &&
+                (b.head<2>().array() <= model.hi.array()).all())
+              ++result.outliers;
+          }
+        }
     }
   });
   // The best score; of equal ones, the first start.
