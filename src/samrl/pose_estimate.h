@@ -4,9 +4,9 @@
 // planar ICP (position on the table and yaw; objects stand as the twin has them) from starts spread
 // over the remaining points, and scored by the points its surface explains against the points
 // inside its outline it does not (and, for an object neither on nor under another, the points
-// over it: a taller box of clutter is not taken for it). Objects are taken best score first, each removing the points it
-// explains, so two objects never claim the same points. An object with too few points is reported
-// unseen (hidden behind something, or out of view) at the twin's own pose.
+// over it: a taller box of clutter is not taken for it). Objects are taken best score first, each
+// removing the points it explains, so two objects never claim the same points. An object with too
+// few points is reported unseen (hidden behind something, or out of view) at the twin's own pose.
 #pragma once
 
 #include <Eigen/Core>

@@ -96,9 +96,10 @@ TEST(ScriptedExpert, RestartDoesAStepAgainWhereTheSceneIsNow) {
 
 // The hole believed a few mm from where it is (a robot's estimate from a frame is this far off):
 // the peg comes down beside the hole onto the block's top. With the task's search the expert walks
-// a spiral there until the peg drops in; without it, the peg stays on top. (A miss toward the
-// fingers, the block's y, the twin's stiff arm either shoves in without a search or does not find
-// with one; on the proxy the search finds those too: docs/samrl.md.)
+// a spiral there until the peg drops in; without it, the peg stays on top. (Misses along the
+// block's y, the fingers' axis, are left out: in the twin, whose arm is stiffer than the proxy's,
+// the peg was either pushed in without a search or not found with one. On the proxy the search
+// finds those too: docs/samrl.md.)
 TEST(ScriptedExpert, SearchFindsAHoleTheBeliefMissed) {
   const TaskSpec spec = LoadTaskSpec("peg_insertion");
   ASSERT_GT(spec.expert.steps.back().search, 0) << "the insertion step has no search";
