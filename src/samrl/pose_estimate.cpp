@@ -235,14 +235,8 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model,
   const auto key = [](int64_t x, int64_t y) { return (x << 32) ^ (y & 0xffffffff); };
   for (std::size_t i = 0; i < points.size(); ++i)
     buckets[key(bucket_of(points[i].x()), bucket_of(points[i].y()))].push_back(int(i));
-  // The points near a pose, in the body's frame: within its outline and height, with margin.
-  const auto near = [&](const core::Pose& pose, double margin, std::vector<Eigen::Vector3d>& local,
-                        std::vector<int>& index) {
-    local.clear();
-    index.clear();
-    const core::Pose inv = pose.Inverse();
-    const double reach = extent(margin);
-    const Eigen::Vector3d& t = pose.translation;
+  // The points in the buckets within `reach` of `t` on the table's plane (a few farther), unsorted.
+  const auto candidates_near = [&](const Eigen::Vector3d& t, double reach) {
     std::vector<int> candidates;
     for (int64_t x = bucket_of(t.x() - reach); x <= bucket_of(t.x() + reach); ++x)
       for (int64_t y = bucket_of(t.y() - reach); y <= bucket_of(t.y() + reach); ++y) {
@@ -250,6 +244,15 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model,
         if (it != buckets.end())
           candidates.insert(candidates.end(), it->second.begin(), it->second.end());
       }
+    return candidates;
+  };
+  // The points near a pose, in the body's frame: within its outline and height, with margin.
+  const auto near = [&](const core::Pose& pose, double margin, std::vector<Eigen::Vector3d>& local,
+                        std::vector<int>& index) {
+    local.clear();
+    index.clear();
+    const core::Pose inv = pose.Inverse();
+    std::vector<int> candidates = candidates_near(pose.translation, extent(margin));
     std::sort(candidates.begin(), candidates.end());
     for (const int i : candidates) {
       const Eigen::Vector3d b = inv * points[i];
@@ -327,21 +330,15 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model,
     }
     if (model.alone) {
       // Points over its outline, above its top: something taller stands where it is fitted.
-      const double r = std::hypot(model.radius, model.z_max + kOverHeight);
       const core::Pose inv = pose.Inverse();
-      const Eigen::Vector3d& t = pose.translation;
-      for (int64_t x = bucket_of(t.x() - r); x <= bucket_of(t.x() + r); ++x)
-        for (int64_t y = bucket_of(t.y() - r); y <= bucket_of(t.y() + r); ++y) {
-          const auto it = buckets.find(key(x, y));
-          if (it == buckets.end()) continue;
-          for (const int i : it->second) {
-            const Eigen::Vector3d b = inv * points[i];
-            if (b.z() > model.z_max + options_.reach && b.z() <= model.z_max + kOverHeight &&
-                (b.head<2>().array() >= model.lo.array()).all() &&
-                (b.head<2>().array() <= model.hi.array()).all())
-              ++result.outliers;
-          }
-        }
+      const double r = std::hypot(model.radius, model.z_max + kOverHeight);
+      for (const int i : candidates_near(pose.translation, r)) {
+        const Eigen::Vector3d b = inv * points[i];
+        if (b.z() > model.z_max + options_.reach && b.z() <= model.z_max + kOverHeight &&
+            (b.head<2>().array() >= model.lo.array()).all() &&
+            (b.head<2>().array() <= model.hi.array()).all())
+          ++result.outliers;
+      }
     }
   });
   // The best score; of equal ones, the first start.
