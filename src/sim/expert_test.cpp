@@ -105,9 +105,10 @@ TEST(ScriptedExpert, SearchFindsAHoleTheBeliefMissed) {
   ASSERT_GT(spec.expert.steps.back().search, 0) << "the insertion step has no search";
   TaskSpec blind = spec;
   blind.expert.steps.back().search = 0;
+  const Task probe(spec);
   std::vector<int> hole_sites;
   for (const char* name : {"hole_top", "hole_goal"}) {
-    hole_sites.push_back(mj_name2id(Task(spec).model(), mjOBJ_SITE, name));
+    hole_sites.push_back(mj_name2id(probe.model(), mjOBJ_SITE, name));
     ASSERT_GE(hole_sites.back(), 0) << name;
   }
   const auto run = [&](const TaskSpec& spec, const Eigen::Vector3d& miss) {
@@ -134,8 +135,7 @@ TEST(ScriptedExpert, SearchFindsAHoleTheBeliefMissed) {
   for (const Eigen::Vector3d miss : {Eigen::Vector3d(0.003, 0, 0), Eigen::Vector3d(0.002, 0.003, 0),
                                      Eigen::Vector3d(0.004, 0.003, 0)}) {
     EXPECT_GE(run(spec, miss), 3) << "of 4 searching, the hole missed by " << miss.transpose();
-    EXPECT_LE(run(blind, miss), 1) << "of 4 not searching, the hole missed by "
-                                   << miss.transpose();
+    EXPECT_LE(run(blind, miss), 1) << "of 4 not searching, the hole missed by " << miss.transpose();
   }
 }
 
