@@ -294,15 +294,20 @@ void AddTrainSamrl(CLI::App& train, int& exit_code) {
   auto cli = std::make_shared<Cli>();
   auto* c = train.add_subcommand(
       "samrl",
-      "SAM-RL's sensing-aware Q: the twin actor's simulated episodes in the twin, each looking "
-      "from a random view, and Q(view) fitted to their returns; DIR/q.pt is what eval --actor "
-      "twin --look q --q reads; resumes its episodes (JSON report)");
+      "SAM-RL's sensing-aware Q: the twin actor's simulated episodes in the twin, each look "
+      "from a random view, and Q(view, the actor's next step) fitted to their returns; DIR/q.pt "
+      "is what eval --actor twin --look q --q reads; resumes its episodes (JSON report)");
   auto& o = cli->options;
   c->add_option("--task", cli->task, "the twin's task name or task.yaml (e.g. RUN/twin/task.yaml)")
       ->required();
-  c->add_option("--out", cli->out, "directory for episodes.*.jsonl, q.pt and q.json")->required();
-  c->add_option("--episodes", o.episodes, "simulated episodes, one view each")
-      ->check(CLI::Range(4, 100000));
+  c->add_option("--out", cli->out, "directory for episodes.*.jsonl, looks.*.jsonl, q.pt and q.json")
+      ->required();
+  c->add_option("--episodes", o.episodes, "simulated episodes")->check(CLI::Range(4, 100000));
+  c->add_option("--max-looks", o.max_looks,
+                "looks per episode at most, each from a random view (1: look once)")
+      ->check(CLI::Range(1, 10));
+  c->add_flag("--view-only{false}", o.plan,
+              "Q reads the view alone, not the actor's plan (its next step) with it");
   c->add_option("--level", o.level, "the twin's randomization level")->check(CLI::Range(0, 3));
   c->add_option("--seed", o.seed, "episode seeds (and Q's initial weights)");
   c->add_option("--workers", o.workers, "threads running episodes (the episodes do not change)")
@@ -322,6 +327,7 @@ void AddTrainSamrl(CLI::App& train, int& exit_code) {
                                 {"task", task.name},
                                 {"episodes", r.episodes},
                                 {"successes", r.successes},
+                                {"looks", r.looks},
                                 {"resumed_episodes", r.resumed},
                                 {"valid_mse", r.fit.valid_loss},
                                 {"valid_mse_of_the_mean", r.fit.valid_baseline},

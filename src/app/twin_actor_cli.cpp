@@ -86,7 +86,7 @@ TwinActorOnRobot::TwinActorOnRobot(reality::Robot& robot, const sim::TaskSpec& t
   if (cli.look == "q") {
     q_ = pipeline::LoadSensingQ(cli.q, task);
     look_ = samrl::ActiveLook(robot, *geometry_, task.objects, q_.mount, q_.search, capture, search,
-                              seed, samrl::QScore(q_.net, torch::Tensor()));
+                              seed, samrl::QLookScore(q_.net));
   } else {
     look_ = cli.look == "fixed" ? samrl::FixedLook(robot, camera.pose, capture)
             : cli.look == "best-fixed"

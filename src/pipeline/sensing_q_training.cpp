@@ -5,8 +5,10 @@
 #include <algorithm>
 #include <exception>
 #include <fstream>
+#include <map>
 #include <mutex>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <thread>
 
 #include "core/error.h"
@@ -24,11 +26,92 @@ namespace twinforge::pipeline {
 
 namespace {
 
-// The view episode `seed` looks from: drawn uniformly within the mount's limits.
-std::pair<double, double> EpisodeView(const samrl::OrbitMount& mount, uint64_t seed) {
-  core::Rng rng(seed, 0x5e17);
-  const double azimuth = rng.Uniform(mount.min_azimuth, mount.max_azimuth);
-  return {azimuth, rng.Uniform(mount.min_elevation, mount.max_elevation)};
+// The views an episode looks from, one after another: drawn uniformly within the mount's limits.
+class EpisodeViews {
+ public:
+  EpisodeViews(const samrl::OrbitMount& mount, uint64_t seed) : mount_(mount), rng_(seed, 0x5e17) {}
+  std::pair<double, double> Next() {
+    const double azimuth = rng_.Uniform(mount_.min_azimuth, mount_.max_azimuth);
+    return {azimuth, rng_.Uniform(mount_.min_elevation, mount_.max_elevation)};
+  }
+
+ private:
+  samrl::OrbitMount mount_;
+  core::Rng rng_;
+};
+
+// One look of an episode: where it looked from and what the actor believed and planned then, the
+// line a worker's looks.<worker>.jsonl holds for it.
+struct LookRecord {
+  uint64_t seed = 0;  // the episode's
+  int look = 0;
+  double azimuth = 0, elevation = 0;
+  std::array<double, 7> q{};
+  double gripper_width = 0;
+  std::vector<std::pair<std::string, core::Pose>> objects;
+  std::string held;
+  int step = 0, steps = 1;
+};
+
+nlohmann::json LookJson(const LookRecord& r) {
+  nlohmann::json objects = nlohmann::json::object();
+  for (const auto& [name, p] : r.objects)
+    objects[name] = {p.translation.x(), p.translation.y(), p.translation.z(), p.rotation.w(),
+                     p.rotation.x(),    p.rotation.y(),    p.rotation.z()};
+  return {{"seed", r.seed},           {"look", r.look}, {"azimuth", r.azimuth},
+          {"elevation", r.elevation}, {"q", r.q},       {"gripper_width", r.gripper_width},
+          {"objects", objects},       {"held", r.held}, {"step", r.step},
+          {"steps", r.steps}};
+}
+
+LookRecord LookFromJson(const nlohmann::json& j) {
+  LookRecord r;
+  r.seed = j.at("seed").get<uint64_t>();
+  r.look = j.at("look").get<int>();
+  r.azimuth = j.at("azimuth").get<double>();
+  r.elevation = j.at("elevation").get<double>();
+  r.q = j.at("q").get<std::array<double, 7>>();
+  r.gripper_width = j.at("gripper_width").get<double>();
+  for (const auto& [name, v] : j.at("objects").items()) {
+    const auto x = v.get<std::array<double, 7>>();
+    core::Pose p;
+    p.translation = {x[0], x[1], x[2]};
+    p.rotation = core::Quat(x[3], x[4], x[5], x[6]).normalized();
+    r.objects.emplace_back(name, p);
+  }
+  r.held = j.at("held").get<std::string>();
+  r.step = j.at("step").get<int>();
+  r.steps = j.at("steps").get<int>();
+  return r;
+}
+
+// The looks a worker's file holds, by episode seed and look; a look written twice (an episode
+// killed and run again) keeps its last line.
+void ReadLooks(const std::filesystem::path& file,
+               std::map<std::pair<uint64_t, int>, LookRecord>& looks) {
+  std::ifstream in(file);
+  std::string line;
+  for (int number = 1; std::getline(in, line); ++number) {
+    try {
+      const LookRecord r = LookFromJson(nlohmann::json::parse(line));
+      looks[{r.seed, r.look}] = r;
+    } catch (const nlohmann::json::exception& e) {
+      throw core::ConfigError(file.string() + ":" + std::to_string(number), "", e.what());
+    }
+  }
+}
+
+// A looks file a killed run left with a torn last line loses that line, so that appending goes on
+// after the last whole one.
+void DropTornLine(const std::filesystem::path& file) {
+  if (!std::filesystem::exists(file)) return;
+  std::ifstream in(file, std::ios::binary);
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (text.empty() || text.back() == '\n') return;
+  const std::size_t keep =
+      text.find_last_of('\n') == std::string::npos ? 0 : text.find_last_of('\n') + 1;
+  spdlog::warn("train samrl: {} ends in a torn line (a killed run); dropped", file.string());
+  std::filesystem::resize_file(file, keep);
 }
 
 nlohmann::json MountJson(const samrl::OrbitMount& m) {
@@ -51,23 +134,43 @@ samrl::OrbitMount MountFromJson(const nlohmann::json& j) {
   return m;
 }
 
-// One worker: its own simulated twin and twin actor, the trials i % workers == worker.
+// One worker: its own simulated twin and twin actor, the trials i % workers == worker. Each look
+// is from the episode's next random view, and is appended to `looks_file`.
 RealityEvalReport RunEpisodes(const sim::TaskSpec& twin, const SensingQTrainOptions& options,
                               const samrl::OrbitMount& mount, const nlohmann::json& header,
                               int worker, const std::filesystem::path& log,
+                              const std::filesystem::path& looks_file,
                               const std::function<void(const TrialRecord&)>& on_trial) {
   const auto robot = reality::ProxyReality::SimulatedTwin(twin);
   const sim::CameraIntrinsics capture =
       samrl::ScaleIntrinsics(sim::MakeCamera(twin.camera).intrinsics, options.capture_scale);
-  core::Pose view;
-  const samrl::Look look = [&](const samrl::LookContext&) {
-    return std::vector<reality::RgbdFrame>{robot->Capture({view, capture})};
+  DropTornLine(looks_file);
+  std::ofstream looks_out(looks_file, std::ios::app);
+  if (!looks_out) throw core::IoError("train samrl: cannot append to " + looks_file.string());
+  uint64_t episode = 0;
+  int looked = 0;
+  std::optional<EpisodeViews> views;
+  const samrl::Look look = [&](const samrl::LookContext& context) {
+    LookRecord r;
+    r.seed = episode;
+    r.look = looked++;
+    std::tie(r.azimuth, r.elevation) = views->Next();
+    for (int i = 0; i < 7; ++i) r.q[i] = context.observation.q[i];
+    r.gripper_width = context.observation.gripper_width;
+    r.objects = context.objects;
+    r.held = context.held;
+    r.step = context.step;
+    r.steps = context.steps;
+    looks_out << LookJson(r).dump() << "\n" << std::flush;
+    if (!looks_out) throw core::IoError("train samrl: cannot write to " + looks_file.string());
+    return std::vector<reality::RgbdFrame>{
+        robot->Capture({samrl::OrbitPose(mount, r.azimuth, r.elevation), capture})};
   };
-  samrl::RelookOptions once;
-  once.max_looks = 1;
+  samrl::RelookOptions relook;
+  relook.max_looks = options.max_looks;
   // The workers share the cores: each fits its objects on one thread.
-  samrl::TwinActor actor(std::make_shared<const sim::Task>(twin), *robot, look, true, {}, {}, once,
-                         options.workers > 1 ? 1 : 0);
+  samrl::TwinActor actor(std::make_shared<const sim::Task>(twin), *robot, look, true, {}, {},
+                         relook, options.workers > 1 ? 1 : 0);
   RealityEvalOptions o;
   o.levels = {options.level};
   o.trials = options.episodes;
@@ -76,8 +179,9 @@ RealityEvalReport RunEpisodes(const sim::TaskSpec& twin, const SensingQTrainOpti
   o.workers = options.workers;
   o.on_trial = on_trial;
   const auto begin = [&](uint64_t seed) {
-    const auto [azimuth, elevation] = EpisodeView(mount, seed);
-    view = samrl::OrbitPose(mount, azimuth, elevation);
+    episode = seed;
+    looked = 0;
+    views.emplace(mount, seed);
     actor.Begin(seed);
   };
   return EvaluateOperatorOnReality(*robot, {&actor, begin, header, nullptr}, twin, o, log);
@@ -102,7 +206,8 @@ SensingQTrainReport TrainSensingQ(const sim::TaskSpec& twin, const SensingQTrain
   const samrl::OrbitMount mount = samrl::ObjectsMount(task);
   const std::string twin_hash = TwinFingerprint(twin);
   const nlohmann::json header = {{"actor", "twin"},
-                                 {"look", "a random view on the mount, once"},
+                                 {"look", "a random view on the mount at each look"},
+                                 {"max_looks", options.max_looks},
                                  {"twin_hash", twin_hash},
                                  {"mount", MountJson(mount)},
                                  {"capture_scale", options.capture_scale}};
@@ -127,8 +232,9 @@ SensingQTrainReport TrainSensingQ(const sim::TaskSpec& twin, const SensingQTrain
       try {
         SensingQTrainOptions o = options;
         o.workers = workers;
-        reports[w] = RunEpisodes(twin, o, mount, header, w,
-                                 out_dir / ("episodes." + std::to_string(w) + ".jsonl"), on_trial);
+        const std::string n = std::to_string(w);
+        reports[w] = RunEpisodes(twin, o, mount, header, w, out_dir / ("episodes." + n + ".jsonl"),
+                                 out_dir / ("looks." + n + ".jsonl"), on_trial);
       } catch (...) {
         errors[w] = std::current_exception();
       }
@@ -146,41 +252,60 @@ SensingQTrainReport TrainSensingQ(const sim::TaskSpec& twin, const SensingQTrain
   std::sort(trials.begin(), trials.end(),
             [](const TrialRecord& a, const TrialRecord& b) { return a.trial < b.trial; });
 
-  // Each episode's view as the actor would render it in the twin before acting, and its return.
+  // Each look's view as the actor would render it in the twin it believed then, and its plan,
+  // paired with the episode's return.
+  std::map<std::pair<uint64_t, int>, LookRecord> looks;
+  for (int w = 0; w < workers; ++w)
+    ReadLooks(out_dir / ("looks." + std::to_string(w) + ".jsonl"), looks);
   real2sim::TwinGeometry geometry(twin, 600);
-  const samrl::TargetView at_rest = samrl::TargetVisibilityAtRest(geometry, task, twin.objects);
   const core::PinholeIntrinsics search = samrl::LookSearchCamera();
+  const int steps = int(twin.expert.steps.size());
   std::vector<samrl::ViewReturn> samples;
   nlohmann::json views = nlohmann::json::array();
   for (const TrialRecord& t : trials) {
-    const auto [azimuth, elevation] = EpisodeView(mount, t.seed);
-    torch::NoGradGuard no_grad;
-    const real2sim::SoftImage image = real2sim::SoftRasterize(
-        at_rest.mesh, search,
-        samrl::OrbitPose(mount, torch::tensor({azimuth, elevation}, torch::kFloat64)));
-    samples.push_back({samrl::ViewInput(image), torch::Tensor(), t.success ? 1.0 : 0.0});
-    views.push_back({{"trial", t.trial},
-                     {"azimuth", azimuth},
-                     {"elevation", elevation},
-                     {"targets_fill", at_rest.score(image).item<double>()},
-                     {"success", t.success}});
     report.successes += t.success;
+    for (auto it = looks.lower_bound({t.seed, 0}); it != looks.end() && it->first.first == t.seed;
+         ++it) {
+      const LookRecord& r = it->second;
+      torch::NoGradGuard no_grad;
+      const samrl::TargetView seen =
+          samrl::BelievedView(geometry, r.q, r.gripper_width, r.objects, r.held, twin.objects);
+      const real2sim::SoftImage image = real2sim::SoftRasterize(
+          seen.mesh, search,
+          samrl::OrbitPose(mount, torch::tensor({r.azimuth, r.elevation}, torch::kFloat64)));
+      samples.push_back({samrl::ViewInput(image),
+                         options.plan ? samrl::PlanInput(r.step, steps) : torch::Tensor(),
+                         t.success ? 1.0 : 0.0, t.trial});
+      views.push_back({{"trial", t.trial},
+                       {"look", r.look},
+                       {"azimuth", r.azimuth},
+                       {"elevation", r.elevation},
+                       {"step", r.step},
+                       {"targets_fill", seen.score(image).item<double>()},
+                       {"success", t.success}});
+    }
   }
   report.episodes = int(trials.size());
+  report.looks = int(samples.size());
 
   torch::manual_seed(options.seed);
-  samrl::SensingQNet net(search.height, search.width, 0);
+  samrl::SensingQNet net(search.height, search.width, options.plan ? steps : 0);
   samrl::SensingQOptions fit = options.fit;
   fit.seed = options.seed;
   report.fit = samrl::FitSensingQ(net, samples, fit);
   core::Rng rng(options.seed, 0xc40);
-  report.chosen = samrl::ChooseView(at_rest.mesh, search, mount,
-                                    samrl::QScore(net, torch::Tensor()), rng, samrl::LookSearch());
+  const samrl::TargetView at_rest = samrl::TargetVisibilityAtRest(geometry, task, twin.objects);
+  report.chosen = samrl::ChooseView(
+      at_rest.mesh, search, mount,
+      samrl::QScore(net, options.plan ? samrl::PlanInput(0, steps) : torch::Tensor()), rng,
+      samrl::LookSearch());
   spdlog::info(
-      "train samrl: {}/{} simulated episodes succeeded; Q's held-out squared error {:.3f} "
-      "(predicting the mean: {:.3f}); its view: azimuth {:.2f}, elevation {:.2f}, Q {:.2f}",
-      report.successes, report.episodes, report.fit.valid_loss, report.fit.valid_baseline,
-      report.chosen.azimuth, report.chosen.elevation, report.chosen.score);
+      "train samrl: {}/{} simulated episodes succeeded, {} looks; Q's held-out squared error "
+      "{:.3f} (predicting the mean: {:.3f}); its first view: azimuth {:.2f}, elevation {:.2f}, "
+      "Q {:.2f}",
+      report.successes, report.episodes, report.looks, report.fit.valid_loss,
+      report.fit.valid_baseline, report.chosen.azimuth, report.chosen.elevation,
+      report.chosen.score);
 
   report.q_file = out_dir / "q.pt";
   const std::filesystem::path partial = out_dir / "q.pt.partial";
@@ -197,13 +322,20 @@ SensingQTrainReport TrainSensingQ(const sim::TaskSpec& twin, const SensingQTrain
                                  {"cx", search.cx},
                                  {"cy", search.cy}}},
                                {"mount", MountJson(mount)},
+                               {"action", options.plan ? "the expert step the actor does next, "
+                                                         "one-hot (PlanInput)"
+                                                       : "none: Q reads the view alone"},
+                               {"action_dim", net->action_dim()},
                                {"options",
                                 {{"episodes", options.episodes},
                                  {"level", options.level},
                                  {"seed", options.seed},
                                  {"capture_scale", options.capture_scale},
+                                 {"max_looks", options.max_looks},
+                                 {"plan", options.plan},
                                  {"fit_steps", fit.steps}}},
                                {"episodes", report.episodes},
+                               {"looks", report.looks},
                                {"successes", report.successes},
                                {"fit",
                                 {{"train_mse", report.fit.train_loss},
@@ -230,6 +362,7 @@ SensingQModel LoadSensingQ(const std::filesystem::path& q_file, const sim::TaskS
   if (meta.is_discarded() || !meta.is_object())
     throw core::ConfigError(meta_file.string(), "", "not a JSON object");
   SensingQModel model;
+  int action_dim = 0;
   try {
     if (meta.at("twin_hash").get<std::string>() != TwinFingerprint(twin))
       throw core::Error("sensing Q: " + q_file.string() + " was trained on another twin (" +
@@ -237,10 +370,17 @@ SensingQModel LoadSensingQ(const std::filesystem::path& q_file, const sim::TaskS
     const nlohmann::json& v = meta.at("view");
     model.search = {v.at("width"), v.at("height"), v.at("fx"), v.at("fy"), v.at("cx"), v.at("cy")};
     model.mount = MountFromJson(meta.at("mount"));
+    // Qs written before stop 44 read the view alone.
+    action_dim = meta.value("action_dim", 0);
   } catch (const nlohmann::json::exception& e) {
     throw core::ConfigError(meta_file.string(), "", e.what());
   }
-  model.net = samrl::SensingQNet(model.search.height, model.search.width, 0);
+  const int steps = int(twin.expert.steps.size());
+  if (action_dim != 0 && action_dim != steps)
+    throw core::ConfigError(meta_file.string(), "action_dim",
+                            "a plan of " + std::to_string(action_dim) +
+                                " steps; the twin's expert has " + std::to_string(steps));
+  model.net = samrl::SensingQNet(model.search.height, model.search.width, action_dim);
   try {
     torch::load(model.net, q_file.string());
   } catch (const c10::Error& e) {

@@ -1,9 +1,11 @@
 // SAM-RL's sensing-aware Q learned from simulated episodes (`train samrl`). The twin actor runs
 // episodes in the twin itself (ProxyReality::SimulatedTwin: the twin's physics, an ideal sensor),
-// each looking once from a camera pose drawn on the orbit mount. The view it would render in the
-// twin from that pose, before acting, is paired with the episode's return (1 on success, else 0),
-// and Q(view) is fitted to the returns by regression. At run time (`eval --actor twin --look q`)
-// each look takes the view Q scores best in the twin as the actor believes it.
+// looking as eval's does (first, then again after the expert steps marked `look`), each look
+// from a camera pose drawn on the orbit mount. The view it would render in the twin from that
+// pose, as it believed the scene then, and its plan then (the expert step it does next) are
+// paired with the episode's return (1 on success, else 0), and Q(view, plan) is fitted to the
+// returns by regression. At run time (`eval --actor twin --look q`) each look takes the view Q
+// scores best for the actor's plan, in the twin as the actor believes it.
 //
 // The episodes are seeded trials of the evaluation harness (EvaluateOperatorOnReality), split
 // among worker threads, each with its own simulated twin and log: a killed run resumes after the
@@ -25,8 +27,14 @@
 namespace twinforge::pipeline {
 
 struct SensingQTrainOptions {
-  int episodes = 120;  // simulated episodes, one view each
+  int episodes = 120;  // simulated episodes
   int level = 1;       // the twin's randomization level
+  // Looks per episode at most, each from a random view (the actor looks again as eval's does);
+  // every look is a sample for Q.
+  int max_looks = 3;
+  // Q reads the actor's plan at the look (the expert step it does next) as its action; false: the
+  // view alone (as before stop 44).
+  bool plan = true;
   uint64_t seed = 7000;
   int workers = 2;  // threads, each running its own simulated twin
   // The simulated frames: this times the task camera's resolution, as eval --actor twin's.
@@ -43,6 +51,7 @@ struct SensingQTrainOptions {
 
 struct SensingQTrainReport {
   int episodes = 0, successes = 0, resumed = 0;
+  int looks = 0;  // samples Q was fitted to
   samrl::SensingQReport fit;
   samrl::ViewChoice chosen;  // the view Q scores best with the twin at home and the arm at rest
   std::filesystem::path q_file;
@@ -52,7 +61,8 @@ struct SensingQTrainReport {
 // The twin task's identity by content (its task file and scene).
 std::string TwinFingerprint(const sim::TaskSpec& twin);
 
-// Runs the episodes under `out_dir` (episodes.<worker>.jsonl), fits Q and writes out_dir/q.pt
+// Runs the episodes under `out_dir` (episodes.<worker>.jsonl, and their looks in
+// looks.<worker>.jsonl), fits Q and writes out_dir/q.pt
 // with out_dir/q.json beside it (what it was trained on and how well it fits).
 SensingQTrainReport TrainSensingQ(const sim::TaskSpec& twin, const SensingQTrainOptions& options,
                                   const std::filesystem::path& out_dir,

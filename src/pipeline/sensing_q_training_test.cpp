@@ -24,9 +24,11 @@ std::vector<bool> Outcomes(const std::filesystem::path& dir) {
   return outcomes;
 }
 
-// train samrl's loop, small: 6 simulated episodes of the twin actor on the occluded peg's twin.
-// The episodes and their outcomes do not depend on how many workers run them; a second run reads
-// them all back; the Q loads for this twin and is refused, by name, for another.
+// train samrl's loop, small: 6 simulated episodes of the twin actor on the occluded peg's twin,
+// each look from its own random view and recorded with the actor's plan then. The episodes and
+// their outcomes do not depend on how many workers run them; a second run reads them all back
+// (a torn last line of a looks file dropped); the Q reads the plan, or with --view-only the view
+// alone; it loads for this twin and is refused, by name, for another.
 TEST(TrainSensingQ, RunsEpisodesResumesAndLoadsForItsTwinOnly) {
   learn::PinMathThreads(1);
   const sim::TaskSpec twin = sim::LoadTaskSpec("peg_insertion_occluded");
@@ -46,16 +48,31 @@ TEST(TrainSensingQ, RunsEpisodesResumesAndLoadsForItsTwinOnly) {
   EXPECT_EQ(Outcomes(dir / "one"), Outcomes(dir / "two"));
   EXPECT_EQ(one.successes, two.successes);
   const nlohmann::json views = ReadJson(dir / "one" / "q.json").at("views");
-  ASSERT_EQ(views.size(), 6u);
-  EXPECT_NE(views[0].at("azimuth"), views[1].at("azimuth")) << "each episode its own view";
+  ASSERT_EQ(int(views.size()), one.looks);
+  EXPECT_GE(one.looks, 6);
+  EXPECT_LE(one.looks, 6 * o.max_looks);
+  EXPECT_NE(views[0].at("azimuth"), views[1].at("azimuth")) << "each look its own view";
+  const int steps = int(twin.expert.steps.size());
+  for (const auto& v : views) {
+    EXPECT_GE(v.at("step").get<int>(), 0);
+    EXPECT_LE(v.at("step").get<int>(), steps);
+    if (v.at("look").get<int>() == 0) EXPECT_EQ(v.at("step").get<int>(), 0) << v;
+  }
 
   o.workers = 2;
+  std::ofstream(dir / "two" / "looks.0.jsonl", std::ios::app) << "{\"seed\": 1, \"lo";
   const SensingQTrainReport again = TrainSensingQ(twin, o, dir / "two");
   EXPECT_EQ(again.resumed, 6);
+  EXPECT_EQ(again.looks, one.looks);
   EXPECT_EQ(Outcomes(dir / "two"), Outcomes(dir / "one"));
 
   const SensingQModel q = LoadSensingQ(two.q_file, twin);
+  EXPECT_EQ(q.net->action_dim(), steps) << "Q reads the plan";
   EXPECT_EQ(q.search.width, 40);
+  o.plan = false;
+  const SensingQTrainReport view_only = TrainSensingQ(twin, o, dir / "two");
+  EXPECT_EQ(view_only.resumed, 6) << "the same episodes, fitted again";
+  EXPECT_EQ(LoadSensingQ(view_only.q_file, twin).net->action_dim(), 0);
   EXPECT_EQ(q.mount.radius, samrl::ObjectsMount(sim::Task(twin)).radius);
   try {
     LoadSensingQ(two.q_file, sim::LoadTaskSpec("peg_insertion"));

@@ -185,28 +185,35 @@ core::Pose BestFixedView(real2sim::TwinGeometry& twin, const sim::Task& task,
   return OrbitPose(mount, choice.azimuth, choice.elevation);
 }
 
+TargetView BelievedView(real2sim::TwinGeometry& twin, const std::array<double, 7>& q,
+                        double gripper_width,
+                        const std::vector<std::pair<std::string, core::Pose>>& objects,
+                        const std::string& held, const std::vector<std::string>& targets) {
+  const mjModel* m = twin.model();
+  for (const auto& [name, pose] : objects) {
+    const int b = mj_name2id(m, mjOBJ_BODY, name.c_str());
+    if (b >= 0 && sim::FreeJointOf(m, b) >= 0) twin.PlaceBody(b, pose);
+  }
+  std::vector<std::string> wanted;
+  for (const auto& t : targets)
+    if (t != held) wanted.push_back(t);
+  return TargetVisibility(twin, q, gripper_width, wanted);
+}
+
 Look ActiveLook(reality::Robot& robot, real2sim::TwinGeometry& twin,
                 const std::vector<std::string>& targets, const OrbitMount& mount,
                 const core::PinholeIntrinsics& search, const core::PinholeIntrinsics& capture,
-                const ViewSearchOptions& options, uint64_t seed, ViewScore score) {
+                const ViewSearchOptions& options, uint64_t seed, LookScore score) {
   return [&robot, &twin, targets, mount, search, capture, options, seed,
           score](const LookContext& context) {
     const reality::Observation& o = context.observation;
     std::array<double, 7> q;
     for (int i = 0; i < 7; ++i) q[i] = o.q[i];
-    // The twin as the actor believes the scene is; what it holds is not looked for.
-    const mjModel* m = twin.model();
-    for (const auto& [name, pose] : context.objects) {
-      const int b = mj_name2id(m, mjOBJ_BODY, name.c_str());
-      if (b >= 0 && sim::FreeJointOf(m, b) >= 0) twin.PlaceBody(b, pose);
-    }
-    std::vector<std::string> wanted;
-    for (const auto& t : targets)
-      if (t != context.held) wanted.push_back(t);
-    const TargetView view = TargetVisibility(twin, q, o.gripper_width, wanted);
+    const TargetView view =
+        BelievedView(twin, q, o.gripper_width, context.objects, context.held, targets);
     core::Rng rng(seed);
     const ViewChoice choice =
-        ChooseView(view.mesh, search, mount, score ? score : view.score, rng, options);
+        ChooseView(view.mesh, search, mount, score ? score(context) : view.score, rng, options);
     spdlog::debug("active look: azimuth {:.2f}, elevation {:.2f}, {} {:.2f}", choice.azimuth,
                   choice.elevation, score ? "Q" : "targets fill (%)", choice.score);
     return std::vector<reality::RgbdFrame>{

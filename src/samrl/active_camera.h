@@ -104,15 +104,26 @@ core::Pose BestFixedView(real2sim::TwinGeometry& twin, const sim::Task& task,
                          const core::PinholeIntrinsics& search,
                          const ViewSearchOptions& options = {}, uint64_t seed = 1);
 
-// SAM-RL's active look: at each look the view that shows `targets` best in the twin (posed at
-// the robot's joints, the objects where the actor believes them; what it holds is no target;
-// ChooseView on TargetVisibility, searched at `search` intrinsics), then one frame from there with
-// the robot's movable camera at `capture` intrinsics. With `score` set (a sensing-aware Q,
-// QScore), the view is the one it scores best instead, on the same target-coloured render.
+// The twin as the actor believes the scene is at a look: the arm at joints `q`, the objects where
+// it believes them, the `targets` it does not hold red (TargetVisibility).
+TargetView BelievedView(real2sim::TwinGeometry& twin, const std::array<double, 7>& q,
+                        double gripper_width,
+                        const std::vector<std::pair<std::string, core::Pose>>& objects,
+                        const std::string& held, const std::vector<std::string>& targets);
+
+// A score of the views at one look, which may depend on what the actor knows and plans then (a
+// sensing-aware Q of the actor's next step).
+using LookScore = std::function<ViewScore(const LookContext&)>;
+
+// SAM-RL's active look: at each look the view that shows `targets` best in the twin as the actor
+// believes it (BelievedView; ChooseView on its TargetVisibility, searched at `search`
+// intrinsics), then one frame from there with the robot's movable camera at `capture`
+// intrinsics. With `score` set (a sensing-aware Q, QLookScore), the view is the one it scores
+// best instead, on the same target-coloured render.
 Look ActiveLook(reality::Robot& robot, real2sim::TwinGeometry& twin,
                 const std::vector<std::string>& targets, const OrbitMount& mount,
                 const core::PinholeIntrinsics& search, const core::PinholeIntrinsics& capture,
                 const ViewSearchOptions& options = {}, uint64_t seed = 1,
-                ViewScore score = nullptr);
+                LookScore score = nullptr);
 
 }  // namespace twinforge::samrl

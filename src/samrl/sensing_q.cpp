@@ -1,7 +1,7 @@
 #include "samrl/sensing_q.h"
 
 #include <algorithm>
-#include <numeric>
+#include <map>
 
 #include "core/error.h"
 
@@ -36,16 +36,36 @@ torch::Tensor SensingQNetImpl::forward(const torch::Tensor& views, const torch::
   return head_->forward(x).view({-1});
 }
 
+torch::Tensor PlanInput(int step, int steps) {
+  if (steps < 1 || step < 0)
+    throw core::Error("sensing Q: a plan is a step of at least one, got step " +
+                      std::to_string(step) + " of " + std::to_string(steps));
+  torch::Tensor plan = torch::zeros({steps});
+  plan[std::min(step, steps - 1)] = 1.0f;
+  return plan;
+}
+
 SensingQReport FitSensingQ(SensingQNet& net, const std::vector<ViewReturn>& samples,
                            const SensingQOptions& options) {
   const int n = int(samples.size());
-  const int valid_n = int(options.validation * n);
+  core::Rng rng(options.seed, 0x9e5);
+  // The groups in a shuffled order, each group's samples together: the first groups are held out.
+  // A sample of no group is its own, after the groups (ungrouped samples keep their order).
+  std::map<std::pair<int, int>, std::vector<int>> groups;
+  for (int i = 0; i < n; ++i)
+    groups[samples[i].group >= 0 ? std::pair(0, samples[i].group) : std::pair(1, i)].push_back(i);
+  std::vector<const std::vector<int>*> shuffled;
+  for (const auto& [group, members] : groups) shuffled.push_back(&members);
+  rng.Shuffle(shuffled);
+  std::vector<int> order;
+  int valid_n = 0;
+  const int valid_groups = int(options.validation * double(shuffled.size()));
+  for (std::size_t g = 0; g < shuffled.size(); ++g) {
+    order.insert(order.end(), shuffled[g]->begin(), shuffled[g]->end());
+    if (int(g) < valid_groups) valid_n += int(shuffled[g]->size());
+  }
   if (n - valid_n < 2)
     throw core::Error("sensing Q: too few samples to fit (" + std::to_string(n) + ")");
-  core::Rng rng(options.seed, 0x9e5);
-  std::vector<int> order(n);
-  std::iota(order.begin(), order.end(), 0);
-  rng.Shuffle(order);
   const auto stack = [&](int first, int last) {
     std::vector<torch::Tensor> v, a;
     std::vector<float> r;
@@ -89,6 +109,13 @@ ViewScore QScore(SensingQNet& net, const torch::Tensor& action) {
       action.defined() ? action.to(torch::kFloat32).view({1, -1}) : torch::zeros({1, 0});
   return [net, a](const real2sim::SoftImage& image) mutable {
     return net->forward(ViewInput(image).unsqueeze(0), a).sum();
+  };
+}
+
+LookScore QLookScore(SensingQNet& net) {
+  return [net](const LookContext& context) mutable {
+    return QScore(net,
+                  net->action_dim() > 0 ? PlanInput(context.step, context.steps) : torch::Tensor());
   };
 }
 

@@ -39,19 +39,25 @@ class SensingQNetImpl : public torch::nn::Module {
 };
 TORCH_MODULE(SensingQNet);
 
-// One simulated episode's record: the view its actor saw, its action (or plan parameters) and
-// its return.
+// One look of a simulated episode: the view its actor saw, its action (or plan) and the
+// episode's return. The looks of one episode share a `group`, so that a fit holds out whole
+// episodes (-1: the sample is its own).
 struct ViewReturn {
   torch::Tensor view;    // [kViewChannels, H, W]
   torch::Tensor action;  // [action_dim]
   double ret = 0;
+  int group = -1;
 };
+
+// The twin actor's plan as Q's action: the expert step it does next (of `steps`), one-hot. A step
+// past the last (the script done) reads as the last.
+torch::Tensor PlanInput(int step, int steps);
 
 struct SensingQOptions {
   int steps = 400;
   int batch = 32;
   double learning_rate = 1e-3;
-  double validation = 0.2;  // share of the samples held out
+  double validation = 0.2;  // share of the samples' groups (episodes) held out
   uint64_t seed = 1;
 };
 
@@ -67,5 +73,8 @@ SensingQReport FitSensingQ(SensingQNet& net, const std::vector<ViewReturn>& samp
 
 // Q of the view rendered from a pose, for one action: the score AscendView climbs.
 ViewScore QScore(SensingQNet& net, const torch::Tensor& action);
+// At each look, Q of the views for the actor's plan then (PlanInput of its next step), or of the
+// view alone for a Q without an action.
+LookScore QLookScore(SensingQNet& net);
 
 }  // namespace twinforge::samrl

@@ -130,7 +130,11 @@ void TwinActor::Begin(uint64_t seed) {
 
 LookContext TwinActor::Context(const reality::Observation& o) const {
   const auto& names = task_->spec().objects;
-  LookContext context{o, {}, carried_ >= 0 ? names[carried_] : ""};
+  LookContext context{o,
+                      {},
+                      carried_ >= 0 ? names[carried_] : "",
+                      expert_.current_step(),
+                      int(task_->spec().expert.steps.size())};
   for (std::size_t i = 0; i < bodies_.size(); ++i)
     context.objects.emplace_back(names[i], env_.BodyPose(bodies_[i]));
   return context;

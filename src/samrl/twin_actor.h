@@ -29,11 +29,14 @@
 namespace twinforge::samrl {
 
 // What the actor knows when it looks: the robot's observation, where it believes each object is
-// (robot base frame; at a trial's first look, where the twin has them) and what it holds.
+// (robot base frame; at a trial's first look, where the twin has them), what it holds, and its
+// plan: the expert step it does next (at a look again, the one after the step marked `look`).
 struct LookContext {
   const reality::Observation& observation;
   std::vector<std::pair<std::string, core::Pose>> objects;
   std::string held;  // "" when the gripper holds nothing
+  int step = 0;      // the expert step the actor does next, of `steps`
+  int steps = 1;
 };
 
 // The frames to estimate the objects from.
