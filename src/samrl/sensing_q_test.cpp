@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include "core/error.h"
 #include "learn/torch_runtime.h"
 #include "samrl/test_scenes.h"
 
@@ -62,6 +63,57 @@ TEST(SensingQ, ALearnedQChoosesAViewThatShowsTheTarget) {
   EXPECT_LT(fixed, 0.1 * best);
   EXPECT_GT(chosen, 0.8 * best) << "chosen " << chosen << " at az " << choice.azimuth << " el "
                                 << choice.elevation << "; best sampled " << best;
+}
+
+// Q reads the actor's plan too. Here the returns of step 0 follow how much of the target a view
+// shows, and those of step 1 the opposite (as if, with the target in hand, a view of it were in
+// the way). Fitted to both, Q at a look chooses a view that shows the target for step 0 and one
+// that hides it for step 1: the plan in the context, not the view alone, decides.
+TEST(SensingQ, AQOfThePlanChoosesAViewForTheStepTheActorDoesNext) {
+  learn::PinMathThreads(1);
+  const auto scene = OccludedTarget();
+  const OrbitMount mount = Mount();
+  core::Rng rng(12);
+  std::vector<std::pair<real2sim::SoftImage, double>> views;
+  double best = 0;
+  for (int i = 0; i < 200; ++i) {
+    const double az = rng.Uniform(mount.min_azimuth, mount.max_azimuth);
+    const double el = rng.Uniform(mount.min_elevation, mount.max_elevation);
+    torch::NoGradGuard no_grad;
+    const auto image = real2sim::SoftRasterize(
+        scene, Small(), OrbitPose(mount, torch::tensor({az, el}, torch::kFloat64)));
+    const double score = VisibleTarget(image).item<double>();
+    best = std::max(best, score);
+    views.emplace_back(image, score);
+  }
+  std::vector<ViewReturn> samples;
+  for (int i = 0; i < int(views.size()); ++i) {
+    const double shown = views[i].second / best;
+    samples.push_back({ViewInput(views[i].first), PlanInput(0, 2), shown, i});
+    samples.push_back({ViewInput(views[i].first), PlanInput(1, 2), 1 - shown, i});
+  }
+  torch::manual_seed(5);
+  SensingQNet net(30, 40, 2);
+  SensingQOptions options;
+  options.steps = 600;
+  const SensingQReport fit = FitSensingQ(net, samples, options);
+  EXPECT_LT(fit.valid_loss, 0.25 * fit.valid_baseline);
+
+  const reality::Observation observation;
+  const LookScore score = QLookScore(net);
+  ViewSearchOptions search;
+  search.samples = 16;
+  search.steps = 40;
+  double shown[2];
+  for (int step = 0; step < 2; ++step) {
+    core::Rng pick(3);
+    const ViewChoice choice =
+        ChooseView(scene, Small(), mount, score({observation, {}, "", step, 2}), pick, search);
+    shown[step] = TrueScore(scene, mount, choice.azimuth, choice.elevation) / best;
+  }
+  EXPECT_GT(shown[0], 0.8) << "step 0's view shows the target";
+  EXPECT_LT(shown[1], 0.2) << "step 1's view hides it";
+  EXPECT_THROW(PlanInput(-1, 2), core::Error);
 }
 
 }  // namespace
