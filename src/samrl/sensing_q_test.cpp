@@ -22,6 +22,26 @@ double TrueScore(const real2sim::RasterMesh& scene, const OrbitMount& mount, dou
       .item<double>();
 }
 
+// 200 views from poses drawn uniformly on the mount, as Q reads them, each with how much of the
+// target it shows (VisibleTarget), and the most any shows.
+struct RandomViews {
+  RandomViews(const real2sim::RasterMesh& scene, const OrbitMount& mount, uint64_t seed) {
+    core::Rng rng(seed);
+    torch::NoGradGuard no_grad;
+    for (int i = 0; i < 200; ++i) {
+      const double az = rng.Uniform(mount.min_azimuth, mount.max_azimuth);
+      const double el = rng.Uniform(mount.min_elevation, mount.max_elevation);
+      const auto image = real2sim::SoftRasterize(
+          scene, Small(), OrbitPose(mount, torch::tensor({az, el}, torch::kFloat64)));
+      const double shown = VisibleTarget(image).item<double>();
+      best = std::max(best, shown);
+      views.emplace_back(ViewInput(image), shown);
+    }
+  }
+  std::vector<std::pair<torch::Tensor, double>> views;
+  double best = 0;
+};
+
 // Episodes "succeed" as much as their view shows the target. A Q learned from 200 such views
 // (depth, silhouette and the target's mask) predicts held-out returns, and gradient ascent on it
 // through the renderer, from the best of a few sampled views, finds a view that shows the target.
@@ -29,19 +49,10 @@ TEST(SensingQ, ALearnedQChoosesAViewThatShowsTheTarget) {
   learn::PinMathThreads(1);
   const auto scene = OccludedTarget();
   const OrbitMount mount = Mount();
-  core::Rng rng(11);
+  const RandomViews views(scene, mount, 11);
   std::vector<ViewReturn> samples;
-  double best = 0;
-  for (int i = 0; i < 200; ++i) {
-    const double az = rng.Uniform(mount.min_azimuth, mount.max_azimuth);
-    const double el = rng.Uniform(mount.min_elevation, mount.max_elevation);
-    torch::NoGradGuard no_grad;
-    const auto image = real2sim::SoftRasterize(
-        scene, Small(), OrbitPose(mount, torch::tensor({az, el}, torch::kFloat64)));
-    const double score = VisibleTarget(image).item<double>();
-    best = std::max(best, score);
-    samples.push_back({ViewInput(image), torch::Tensor(), score});
-  }
+  for (const auto& [view, shown] : views.views) samples.push_back({view, torch::Tensor(), shown});
+  const double best = views.best;
   torch::manual_seed(5);
   SensingQNet net(30, 40, 0);
   SensingQOptions options;
@@ -73,24 +84,13 @@ TEST(SensingQ, AQOfThePlanChoosesAViewForTheStepTheActorDoesNext) {
   learn::PinMathThreads(1);
   const auto scene = OccludedTarget();
   const OrbitMount mount = Mount();
-  core::Rng rng(12);
-  std::vector<std::pair<real2sim::SoftImage, double>> views;
-  double best = 0;
-  for (int i = 0; i < 200; ++i) {
-    const double az = rng.Uniform(mount.min_azimuth, mount.max_azimuth);
-    const double el = rng.Uniform(mount.min_elevation, mount.max_elevation);
-    torch::NoGradGuard no_grad;
-    const auto image = real2sim::SoftRasterize(
-        scene, Small(), OrbitPose(mount, torch::tensor({az, el}, torch::kFloat64)));
-    const double score = VisibleTarget(image).item<double>();
-    best = std::max(best, score);
-    views.emplace_back(image, score);
-  }
+  const RandomViews views(scene, mount, 12);
+  const double best = views.best;
   std::vector<ViewReturn> samples;
-  for (int i = 0; i < int(views.size()); ++i) {
-    const double shown = views[i].second / best;
-    samples.push_back({ViewInput(views[i].first), PlanInput(0, 2), shown, i});
-    samples.push_back({ViewInput(views[i].first), PlanInput(1, 2), 1 - shown, i});
+  for (int i = 0; i < int(views.views.size()); ++i) {
+    const auto& [view, shown] = views.views[i];
+    samples.push_back({view, PlanInput(0, 2), shown / best, i});
+    samples.push_back({view, PlanInput(1, 2), 1 - shown / best, i});
   }
   torch::manual_seed(5);
   SensingQNet net(30, 40, 2);
