@@ -40,8 +40,8 @@ int SuccessesFromView(const sim::TaskSpec& twin, const core::Pose& view, int epi
 // view on the mount, the Q chooses a view from which the twin actor, looking once, succeeds in the
 // twin more often than from the random views, and more often than from the task camera's pose,
 // where the panel hides the hole. Measured (deterministic): 9/48 from the random views; from the
-// Q's view 3/6 at stop 36, 6/6 since the expert searches for the hole (stop 44); 0/6 from the task
-// camera's.
+// Q's view 3/6 at stop 36, 6/6 at stop 44 (the expert searching for the hole since stop 43); 0/6
+// from the task camera's.
 TEST(TrainSensingQ, ItsQsViewSucceedsMoreOftenThanRandomViews) {
   learn::PinMathThreads(1);
   const sim::TaskSpec twin = sim::LoadTaskSpec("peg_insertion_occluded");
