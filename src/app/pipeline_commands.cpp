@@ -308,6 +308,11 @@ void AddTrainSamrl(CLI::App& train, int& exit_code) {
       ->check(CLI::Range(1, 10));
   c->add_flag("--view-only{false}", o.plan,
               "Q reads the view alone, not the actor's plan (its next step) with it");
+  c->add_option_function<std::string>(
+       "--return", [&o](const std::string& r) { o.closeness = r == "closeness"; },
+       "what Q predicts: success (1 or 0) or closeness (how near the twin came to success, "
+       "1 on success; default success)")
+      ->check(CLI::IsMember({"success", "closeness"}));
   c->add_option("--level", o.level, "the twin's randomization level")->check(CLI::Range(0, 3));
   c->add_option("--seed", o.seed, "episode seeds (and Q's initial weights)");
   c->add_option("--workers", o.workers, "threads running episodes (the episodes do not change)")

@@ -85,6 +85,17 @@ LookRecord LookFromJson(const nlohmann::json& j) {
   return r;
 }
 
+// The return Q is fitted to for one episode: its success, or how near the twin came to it.
+double EpisodeReturn(const TrialRecord& t, bool closeness, const std::filesystem::path& dir) {
+  if (!closeness) return t.success ? 1.0 : 0.0;
+  const auto c = t.grader.is_object() ? t.grader.find("success_closeness") : t.grader.end();
+  if (c == t.grader.end() || !c->is_number())
+    throw core::ConfigError(dir.string() + ", episode " + std::to_string(t.trial), "grader",
+                            "no success_closeness for --return closeness (a run written before "
+                            "it was logged: use a fresh directory)");
+  return c->get<double>();
+}
+
 // The looks a worker's file holds, by episode seed and look; a look written twice (an episode
 // killed and run again) keeps its last line.
 void ReadLooks(const std::filesystem::path& file,
@@ -178,6 +189,7 @@ RealityEvalReport RunEpisodes(const sim::TaskSpec& twin, const SensingQTrainOpti
   o.worker = worker;
   o.workers = options.workers;
   o.on_trial = on_trial;
+  o.grader = [&] { return robot->GraderState(); };
   const auto begin = [&](uint64_t seed) {
     episode = seed;
     looked = 0;
@@ -264,6 +276,7 @@ SensingQTrainReport TrainSensingQ(const sim::TaskSpec& twin, const SensingQTrain
   nlohmann::json views = nlohmann::json::array();
   for (const TrialRecord& t : trials) {
     report.successes += t.success;
+    const double episode_return = EpisodeReturn(t, options.closeness, out_dir);
     for (auto it = looks.lower_bound({t.seed, 0}); it != looks.end() && it->first.first == t.seed;
          ++it) {
       const LookRecord& r = it->second;
@@ -275,14 +288,15 @@ SensingQTrainReport TrainSensingQ(const sim::TaskSpec& twin, const SensingQTrain
           samrl::OrbitPose(mount, torch::tensor({r.azimuth, r.elevation}, torch::kFloat64)));
       samples.push_back({samrl::ViewInput(image),
                          options.plan ? samrl::PlanInput(r.step, steps) : torch::Tensor(),
-                         t.success ? 1.0 : 0.0, t.trial});
+                         episode_return, t.trial});
       views.push_back({{"trial", t.trial},
                        {"look", r.look},
                        {"azimuth", r.azimuth},
                        {"elevation", r.elevation},
                        {"step", r.step},
                        {"targets_fill", seen.score(image).item<double>()},
-                       {"success", t.success}});
+                       {"success", t.success},
+                       {"return", episode_return}});
     }
   }
   report.episodes = int(trials.size());
@@ -332,6 +346,7 @@ SensingQTrainReport TrainSensingQ(const sim::TaskSpec& twin, const SensingQTrain
                                  {"seed", options.seed},
                                  {"capture_scale", options.capture_scale},
                                  {"max_looks", options.max_looks},
+                                 {"return", options.closeness ? "closeness" : "success"},
                                  {"plan", options.plan},
                                  {"fit_steps", fit.steps}}},
                                {"episodes", report.episodes},

@@ -19,8 +19,11 @@ nlohmann::json ReadJson(const std::filesystem::path& file) {
 
 // Which of the episodes succeeded, by trial, as q.json lists them.
 std::vector<bool> Outcomes(const std::filesystem::path& dir) {
+  // (Held in a local: a range-for over a member of a temporary reads freed memory.)
+  const nlohmann::json meta = ReadJson(dir / "q.json");
   std::vector<bool> outcomes;
-  for (const auto& v : ReadJson(dir / "q.json").at("views")) outcomes.push_back(v.at("success"));
+  for (const auto& v : meta.at("views")) outcomes.push_back(v.at("success"));
+  EXPECT_FALSE(outcomes.empty()) << dir;
   return outcomes;
 }
 
@@ -73,6 +76,44 @@ TEST(TrainSensingQ, RunsEpisodesResumesAndLoadsForItsTwinOnly) {
   const SensingQTrainReport view_only = TrainSensingQ(twin, o, dir / "two");
   EXPECT_EQ(view_only.resumed, 6) << "the same episodes, fitted again";
   EXPECT_EQ(LoadSensingQ(view_only.q_file, twin).net->action_dim(), 0);
+  // --return closeness: the same episodes, each return how near the twin came to success.
+  o.closeness = true;
+  const SensingQTrainReport dense = TrainSensingQ(twin, o, dir / "two");
+  EXPECT_EQ(dense.resumed, 6);
+  const nlohmann::json dense_views = ReadJson(dir / "two" / "q.json").at("views");
+  int failed_looks = 0, partly_near = 0;
+  for (const auto& v : dense_views) {
+    const double r = v.at("return");
+    if (v.at("success").get<bool>()) {
+      EXPECT_EQ(r, 1.0) << v;
+    } else {
+      ++failed_looks;
+      EXPECT_GE(r, 0.0) << v;
+      EXPECT_LT(r, 1.0) << v;
+      partly_near += r > 0;
+    }
+  }
+  EXPECT_GT(failed_looks, 0) << "all 6 episodes succeeded: the test shows nothing of closeness";
+  EXPECT_GT(partly_near, 0) << "every failure scored 0: closeness told them apart no better";
+  // Episodes logged without it (before it was) are refused by name, not read as 0.
+  {
+    std::ifstream in(dir / "two" / "episodes.0.jsonl");
+    std::string text, line;
+    for (int n = 0; std::getline(in, line); ++n) {
+      if (n == 1)
+        line.replace(line.find("\"grader\""), std::string("\"grader\"").size(), "\"judge\"");
+      text += line + "\n";
+    }
+    in.close();
+    std::ofstream(dir / "two" / "episodes.0.jsonl") << text;
+  }
+  try {
+    TrainSensingQ(twin, o, dir / "two");
+    ADD_FAILURE() << "an episode without its closeness was fitted";
+  } catch (const core::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("success_closeness"), std::string::npos) << e.what();
+  }
+  o.closeness = false;
   EXPECT_EQ(q.mount.radius, samrl::ObjectsMount(sim::Task(twin)).radius);
   try {
     LoadSensingQ(two.q_file, sim::LoadTaskSpec("peg_insertion"));

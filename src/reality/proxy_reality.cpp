@@ -247,7 +247,8 @@ nlohmann::json ProxyReality::GraderState() const {
   return {{"joints", joints},
           {"objects", objects},
           {"gripper", env_->FingerOpening()},
-          {"tool", xyz(env_->EePose().translation)}};
+          {"tool", xyz(env_->EePose().translation)},
+          {"success_closeness", env_->SuccessCloseness()}};
 }
 
 }  // namespace twinforge::reality

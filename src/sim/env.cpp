@@ -274,30 +274,56 @@ StepResult Env::StepTargets(const JointTargets& targets, SubstepHook* hook) {
   return result;
 }
 
-bool Env::Success() const {
-  const mjModel* m = model_.get();
+double Env::Measure(const TaskIndex::Predicate& p) const {
   const mjData* d = data_.get();
+  switch (p.type) {
+    case PredicateType::kSiteDistanceBelow:
+      return (Eigen::Vector3d(d->site_xpos + 3 * p.a) - Eigen::Vector3d(d->site_xpos + 3 * p.b))
+          .norm();
+    case PredicateType::kJointAbove:
+      return d->qpos[model_->jnt_qposadr[p.a]];
+    case PredicateType::kAxisUpright:
+      return (Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(d->xmat + 9 * p.a) *
+              p.axis)
+          .z();
+    case PredicateType::kGripperReleased:
+      return FingerOpening();
+  }
+  return 0;
+}
+
+bool Env::Success() const {
   for (const auto& p : task_->index().predicates) {
+    const double v = Measure(p);
     switch (p.type) {
-      case PredicateType::kSiteDistanceBelow: {
-        const Eigen::Vector3d a(d->site_xpos + 3 * p.a), b(d->site_xpos + 3 * p.b);
-        if ((a - b).norm() >= p.threshold) return false;
+      case PredicateType::kSiteDistanceBelow:
+        if (v >= p.threshold) return false;
         break;
-      }
+      case PredicateType::kAxisUpright:
+        if (v < p.threshold) return false;
+        break;
       case PredicateType::kJointAbove:
-        if (d->qpos[m->jnt_qposadr[p.a]] <= p.threshold) return false;
-        break;
-      case PredicateType::kAxisUpright: {
-        const Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> rot(d->xmat + 9 * p.a);
-        if ((rot * p.axis).z() < p.threshold) return false;
-        break;
-      }
       case PredicateType::kGripperReleased:
-        if (FingerOpening() <= p.threshold) return false;
+        if (v <= p.threshold) return false;
         break;
     }
   }
   return true;
+}
+
+double Env::SuccessCloseness() const {
+  if (Success()) return 1;
+  double closeness = 1;
+  for (const auto& p : task_->index().predicates) {
+    const double v = Measure(p);
+    double share;
+    if (p.type == PredicateType::kSiteDistanceBelow)
+      share = v > 0 ? p.threshold / v : 1;
+    else
+      share = p.threshold > 0 ? v / p.threshold : (v > p.threshold ? 1 : 0);
+    closeness *= std::clamp(share, 0.0, 1.0);
+  }
+  return closeness;
 }
 
 ArmVector Env::ArmPositions() const {

@@ -63,6 +63,12 @@ class Env {
 
   // Whether every success predicate holds now.
   bool Success() const;
+  // How near the scene is to success, in [0, 1]: 1 while every predicate holds, else the product
+  // of each predicate's share: a site distance's threshold / distance, an axis's upward
+  // component / threshold, a joint's value / threshold, the fingers' opening / threshold (each
+  // clamped to [0, 1]; a predicate with threshold <= 0 that fails shares 0). A dense return for
+  // what a sparse success cannot tell apart: a peg beside its hole from one on the floor.
+  double SuccessCloseness() const;
 
   // Privileged state: proprioception, then per object position (3) and quaternion (4), then per
   // task joint its value; all in the robot base frame. Sizes are fixed per task.
@@ -106,6 +112,10 @@ class Env {
   core::Rng& rng() { return rng_; }
 
  private:
+  // What a success predicate measures now: the distance, joint value, upward component or
+  // finger opening it compares with its threshold.
+  double Measure(const TaskIndex::Predicate& p) const;
+
   struct ActiveDisturbance {
     int body = -1, dof = -1;
     Eigen::Vector3d force = Eigen::Vector3d::Zero();

@@ -57,6 +57,52 @@ TEST(Env, PoseRobotAndPlaceBodyPoseTheTwinWithoutSimulating) {
   }
 }
 
+// The dense return SAM-RL's Q may fit: 1 on success, else each predicate's share. A peg held
+// upright above its hole scores the success distance over the tip's; tipped over, less again.
+TEST(Env, SuccessClosenessIsOneOnSuccessAndFallsWithTheTipsDistance) {
+  Env env(std::make_shared<const Task>(LoadTaskSpec("peg_insertion")));
+  env.Reset(5, 1);
+  const int peg = mj_name2id(env.model(), mjOBJ_BODY, "peg");
+  const int tip = mj_name2id(env.model(), mjOBJ_SITE, "peg_tip");
+  const int goal = mj_name2id(env.model(), mjOBJ_SITE, "hole_goal");
+  ASSERT_GE(peg, 0);
+  ASSERT_GE(tip, 0);
+  ASSERT_GE(goal, 0);
+  env.PlaceBody(peg, core::Pose{});
+  const Eigen::Vector3d tip_in_peg = env.SitePose(tip).translation - env.BodyPose(peg).translation;
+  const Eigen::Vector3d hole = env.SitePose(goal).translation;
+  const auto tip_distance = [&] {
+    return (env.SitePose(tip).translation - env.SitePose(goal).translation).norm();
+  };
+  // Upright, the tip 5 mm over the goal: success.
+  env.PlaceBody(peg, core::Pose{hole + Eigen::Vector3d(0, 0, 0.005) - tip_in_peg, {}});
+  ASSERT_TRUE(env.Success());
+  EXPECT_EQ(env.SuccessCloseness(), 1.0);
+  // Upright, 2 and 5 cm over it (a peg standing on the block, one lifted away): 0.5 and 0.2.
+  double last = 1;
+  for (const double height : {0.02, 0.05}) {
+    env.PlaceBody(peg, core::Pose{hole + Eigen::Vector3d(0, 0, height) - tip_in_peg, {}});
+    ASSERT_FALSE(env.Success());
+    EXPECT_NEAR(env.SuccessCloseness(), 0.01 / height, 1e-9) << height;
+    EXPECT_LT(env.SuccessCloseness(), last);
+    last = env.SuccessCloseness();
+  }
+  // Tipped 60 deg about x: the axis's share, 0.5 / 0.98, times the distance's.
+  const core::Quat tipped(Eigen::AngleAxisd(M_PI / 3, Eigen::Vector3d::UnitX()));
+  env.PlaceBody(peg, core::Pose{hole + Eigen::Vector3d(0, 0, 0.02) - tipped * tip_in_peg, tipped});
+  EXPECT_NEAR(tip_distance(), 0.02, 1e-9);
+  EXPECT_NEAR(env.SuccessCloseness(), 0.5 * (0.5 / 0.98), 1e-6);
+  // A drawer pulled half-way to its success opening, the fingers open: a half.
+  Env drawer(DrawerTask());
+  drawer.Reset(1, 0);
+  const int slide = mj_name2id(drawer.model(), mjOBJ_JOINT, "drawer_slide");
+  ASSERT_GE(slide, 0);
+  ASSERT_GT(drawer.FingerOpening(), 0.03);
+  drawer.mutable_data()->qpos[drawer.model()->jnt_qposadr[slide]] = 0.06;
+  EXPECT_FALSE(drawer.Success());
+  EXPECT_NEAR(drawer.SuccessCloseness(), 0.5, 1e-9);
+}
+
 // A top-down tool turning all the way round, wobbling a little: its proprioceptive quaternion
 // moves smoothly (with the sign chosen by w >= 0 it flipped each time w crossed zero).
 TEST(Env, TheToolsQuaternionDoesNotFlipAsATopDownToolTurns) {
