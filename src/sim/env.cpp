@@ -292,35 +292,39 @@ double Env::Measure(const TaskIndex::Predicate& p) const {
   return 0;
 }
 
-bool Env::Success() const {
-  for (const auto& p : task_->index().predicates) {
-    const double v = Measure(p);
-    switch (p.type) {
-      case PredicateType::kSiteDistanceBelow:
-        if (v >= p.threshold) return false;
-        break;
-      case PredicateType::kAxisUpright:
-        if (v < p.threshold) return false;
-        break;
-      case PredicateType::kJointAbove:
-      case PredicateType::kGripperReleased:
-        if (v <= p.threshold) return false;
-        break;
-    }
+namespace {
+
+// Whether a predicate holds, given what it measures (Env::Measure).
+bool Holds(const TaskIndex::Predicate& p, double v) {
+  switch (p.type) {
+    case PredicateType::kSiteDistanceBelow:
+      return v < p.threshold;
+    case PredicateType::kAxisUpright:
+      return v >= p.threshold;
+    case PredicateType::kJointAbove:
+    case PredicateType::kGripperReleased:
+      return v > p.threshold;
   }
+  return false;
+}
+
+}  // namespace
+
+bool Env::Success() const {
+  for (const auto& p : task_->index().predicates)
+    if (!Holds(p, Measure(p))) return false;
   return true;
 }
 
 double Env::SuccessCloseness() const {
-  if (Success()) return 1;
   double closeness = 1;
   for (const auto& p : task_->index().predicates) {
     const double v = Measure(p);
-    double share;
-    if (p.type == PredicateType::kSiteDistanceBelow)
-      share = v > 0 ? p.threshold / v : 1;
-    else
-      share = p.threshold > 0 ? v / p.threshold : (v > p.threshold ? 1 : 0);
+    if (Holds(p, v)) continue;
+    // Each failing predicate's share; one with threshold <= 0 shares 0.
+    const double share = p.threshold <= 0                              ? 0
+                         : p.type == PredicateType::kSiteDistanceBelow ? p.threshold / v
+                                                                       : v / p.threshold;
     closeness *= std::clamp(share, 0.0, 1.0);
   }
   return closeness;
