@@ -59,12 +59,20 @@ struct ObjectPoseEstimator::Model {
   // over its outline then speaks against a fit (a taller box of the clutter, whose lower part it
   // explains).
   bool alone = true;
+  // What each point inside its outline that it does not explain costs a fit: the options' weight
+  // for an object alone, 1 for one on or under another (whose points are expected there).
+  double outlier_weight = 1;
   int symmetry = 1;  // turns about z that look alike
 };
 
 namespace {
 // m above an object's top within which points over its outline count against a fit.
 constexpr double kOverHeight = 0.08;
+
+// What a fit is chosen by (PoseEstimateOptions::outlier_weight).
+double FitScore(int inliers, int outliers, double outlier_weight) {
+  return inliers - outlier_weight * outliers;
+}
 }  // namespace
 
 ObjectPoseEstimator::ObjectPoseEstimator(std::shared_ptr<const sim::Task> twin,
@@ -118,6 +126,7 @@ ObjectPoseEstimator::ObjectPoseEstimator(std::shared_ptr<const sim::Task> twin,
   for (auto& model : models_)
     for (const auto& other : models_)
       if (other != model && (over(*model, *other) || over(*other, *model))) model->alone = false;
+  for (auto& model : models_) model->outlier_weight = model->alone ? options_.outlier_weight : 1;
   std::sort(object_geoms_.begin(), object_geoms_.end());
 }
 
@@ -345,7 +354,7 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model,
   double best_score = -1e300;
   for (const Result& result : results) {
     if (!result.scored) continue;
-    const double score = result.inliers - result.outliers;
+    const double score = FitScore(result.inliers, result.outliers, model.outlier_weight);
     if (score > best_score) {
       best_score = score;
       best.pose = result.pose;
@@ -386,7 +395,9 @@ std::vector<ObjectPose> ObjectPoseEstimator::Estimate(
       spdlog::debug(
           "pose estimate: {} fitted to {} points in {:.2f} s", models_[i]->body, points.size(),
           std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
-      if (pick < 0 || fit.inliers - fit.outliers > picked.inliers - picked.outliers) {
+      if (pick < 0 ||
+          FitScore(fit.inliers, fit.outliers, models_[i]->outlier_weight) >
+              FitScore(picked.inliers, picked.outliers, models_[pick]->outlier_weight)) {
         pick = int(i);
         picked = fit;
       }

@@ -43,6 +43,11 @@ struct PoseEstimateOptions {
   double start_reach = 0.03, reach = 0.006;  // m: correspondences kept, annealed from / to
   double inlier = 0.003;                     // m: a point the surface explains
   int min_points = 50;                       // explained points for an object to count as seen
+  // A fit's score: the points it explains less this many for each point inside its outline it
+  // does not, for an object alone (one on or under another, a pancake on its griddle, expects the
+  // other's points there and counts each as 1). A point explained is weak evidence (any surface
+  // there explains it); one where the object would leave free space is strong evidence against.
+  double outlier_weight = 10;
   template <class A>
   void Serialize(A& a) {
     a("background", background);
@@ -58,9 +63,11 @@ struct PoseEstimateOptions {
     a("reach", reach);
     a("inlier", inlier);
     a("min_points", min_points);
+    a("outlier_weight", outlier_weight);
     a.Require(
         background > 0 && cell > 0 && search > 0 && reach > 0 && start_reach >= reach && inlier > 0,
         "reach", "positive distances, start_reach >= reach");
+    a.Require(outlier_weight >= 0, "outlier_weight", "not negative");
     a.Require(yaw_starts >= 1 && iterations >= 1 && min_points >= 1, "yaw_starts",
               "at least one start, iteration and point");
   }
