@@ -83,9 +83,9 @@ TEST(PoseEstimate, NotFittedToATallerBoxOfTheClutter) {
 }
 
 // The proxy's hole block is dark rubber, whose depth returns the sensor loses more than half
-// of: a clutter box of its size, in any other colour, gives a fit up to three times the points
-// to explain. The clutter box has no hole, and its top shows where the block's would be; a point
-// where a fit leaves free space now weighs ten explained ones. These are eval's level-2 trials
+// of: a brighter clutter box of its size gives a fit up to three times the points to explain.
+// The clutter box has no hole, and its top shows where the block's would be; a point where a fit
+// leaves free space now weighs ten explained ones. These are eval's level-2 trials
 // 3, 5 and 13 of seeds 5000, where the block was believed 14-17 cm off, and trial 19 of seeds
 // 7000, where the peg was believed 19 cm off, fitted to the clutter before.
 TEST(PoseEstimate, NotFittedToABoxOfTheClutterThatReturnsMorePoints) {
