@@ -59,20 +59,18 @@ struct ObjectPoseEstimator::Model {
   // over its outline then speaks against a fit (a taller box of the clutter, whose lower part it
   // explains).
   bool alone = true;
-  // What each point inside its outline that it does not explain costs a fit: the options' weight
-  // for an object alone, 1 for one on or under another (whose points are expected there).
-  double outlier_weight = 1;
   int symmetry = 1;  // turns about z that look alike
+  // What a fit is chosen by: the points it explains less those inside its outline it does not,
+  // each weighing options.outlier_weight for an object alone, 1 for one on or under another
+  // (whose points are expected there).
+  double Score(int inliers, int outliers, const PoseEstimateOptions& options) const {
+    return inliers - (alone ? options.outlier_weight : 1) * outliers;
+  }
 };
 
 namespace {
 // m above an object's top within which points over its outline count against a fit.
 constexpr double kOverHeight = 0.08;
-
-// What a fit is chosen by (PoseEstimateOptions::outlier_weight).
-double FitScore(int inliers, int outliers, double outlier_weight) {
-  return inliers - outlier_weight * outliers;
-}
 }  // namespace
 
 ObjectPoseEstimator::ObjectPoseEstimator(std::shared_ptr<const sim::Task> twin,
@@ -126,7 +124,6 @@ ObjectPoseEstimator::ObjectPoseEstimator(std::shared_ptr<const sim::Task> twin,
   for (auto& model : models_)
     for (const auto& other : models_)
       if (other != model && (over(*model, *other) || over(*other, *model))) model->alone = false;
-  for (auto& model : models_) model->outlier_weight = model->alone ? options_.outlier_weight : 1;
   std::sort(object_geoms_.begin(), object_geoms_.end());
 }
 
@@ -354,7 +351,7 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model,
   double best_score = -1e300;
   for (const Result& result : results) {
     if (!result.scored) continue;
-    const double score = FitScore(result.inliers, result.outliers, model.outlier_weight);
+    const double score = model.Score(result.inliers, result.outliers, options_);
     if (score > best_score) {
       best_score = score;
       best.pose = result.pose;
@@ -395,9 +392,8 @@ std::vector<ObjectPose> ObjectPoseEstimator::Estimate(
       spdlog::debug(
           "pose estimate: {} fitted to {} points in {:.2f} s", models_[i]->body, points.size(),
           std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
-      if (pick < 0 ||
-          FitScore(fit.inliers, fit.outliers, models_[i]->outlier_weight) >
-              FitScore(picked.inliers, picked.outliers, models_[pick]->outlier_weight)) {
+      if (pick < 0 || models_[i]->Score(fit.inliers, fit.outliers, options_) >
+                          models_[pick]->Score(picked.inliers, picked.outliers, options_)) {
         pick = int(i);
         picked = fit;
       }
