@@ -36,6 +36,10 @@ void TwinActorCli::Add(CLI::App* c) {
   c->add_option("--capture-scale", capture_scale,
                 "twin actor: the frame's resolution, as a multiple of the task camera's")
       ->check(CLI::Range(1, 16));
+  c->add_option("--settle", settle,
+                "twin actor: m; each object's fit is settled where the squared distances of its "
+                "points to it, each capped at this, are least (0: the ICP's fit as it stops)")
+      ->check(CLI::NonNegativeNumber);
   c->add_option("--max-looks", relook.max_looks,
                 "twin actor: looks per trial at most, the first included; the task's expert steps "
                 "marked look are done again when a look finds an object moved (1: look once)")
@@ -99,6 +103,7 @@ TwinActorOnRobot::TwinActorOnRobot(reality::Robot& robot, const sim::TaskSpec& t
   }
   samrl::PoseEstimateOptions estimate;
   estimate.register_to_robot = cli.register_to == "robot";
+  estimate.settle = cli.settle;
   actor_ = std::make_unique<samrl::TwinActor>(twin_, robot, look_, robot.Info().has_success_oracle,
                                               estimate, core::Pose{}, cli.relook);
   identity_ = {{"actor", "twin"}, {"twin_hash", pipeline::TwinFingerprint(task)}};
@@ -110,6 +115,7 @@ TwinActorOnRobot::TwinActorOnRobot(reality::Robot& robot, const sim::TaskSpec& t
   header_ = identity_;
   header_["look"] = cli.look;
   if (q_.net) header_["q_hash"] = q_.hash;
+  header_["settle"] = cli.settle;
   header_["max_looks"] = cli.relook.max_looks;
   header_["moved"] = cli.relook.moved;
   header_["max_move"] = cli.relook.max_move;

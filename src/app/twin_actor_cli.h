@@ -23,10 +23,11 @@ struct TwinActorCli {
   std::string q;             // --look q: the sensing-aware Q (train samrl's q.pt)
   std::string actor_policy;  // the twin actor acts with this state policy (train imitate's)
   int capture_scale = 8;
+  double settle = samrl::PoseEstimateOptions{}.settle;  // m: each fit settled (0: not)
   samrl::RelookOptions relook;
 
-  // --actor, --actor-policy, --look, --q, --register-to, --capture-scale, --max-looks, --moved,
-  // --max-move.
+  // --actor, --actor-policy, --look, --q, --register-to, --capture-scale, --settle, --max-looks,
+  // --moved, --max-move.
   void Add(CLI::App* command);
   // Throws when the options disagree, with each other or with `policy` (the --policy file:
   // needed by --actor policy, refused by --actor twin; --q goes with --look q); `command` names
