@@ -2,6 +2,8 @@
 // camera, the twin's expert acting on them. The hidden world is read only to grade.
 #include <gtest/gtest.h>
 
+#include <optional>
+
 #include "learn/torch_runtime.h"
 #include "reality/proxy_reality.h"
 #include "samrl/active_camera.h"
@@ -260,6 +262,56 @@ TEST(TwinActorOnReality, LooksAgainAndFollowsAPushedBlock) {
                   0.004)
             << "trial " << trial;
       }
+    }
+  }
+}
+
+// The proxy's pads hold the peg by friction. Grasped 1.5 cm below its top (at `peg_grasp`, as the
+// expert did until stop 49), the peg turns in the fingers as the arm stops over the hole and as
+// its tip drags on the block: in eval's level-3 trial 4 (seed 5000) its middle moved 8 mm
+// relative to the tool and the insertion failed. Grasped at its middle, as the task's expert now
+// does, it stays put and goes in. The twin's fingers hold the peg rigidly: only the proxy shows it.
+TEST(TwinActorOnReality, HoldsThePegAtItsMiddleWhereItDoesNotTurnInTheFingers) {
+  learn::PinMathThreads(1);
+  Scene scene("peg_insertion");
+  const Look look =
+      FixedLook(scene.proxy, scene.camera.pose, ScaleIntrinsics(scene.camera.intrinsics, 8));
+  reality::ActionClient client(scene.proxy, scene.spec.control.limits);
+  const uint64_t seed = core::MixSeed(5000, 3000 + 4);
+  const sim::Env& hidden = scene.proxy.hidden_env();
+  const int peg = mj_name2id(hidden.model(), mjOBJ_BODY, "peg");
+  ASSERT_GE(peg, 0);
+  // The grasp step: down to the peg (its offset from `peg_grasp`).
+  sim::TaskSpec at_top = scene.spec;
+  auto& down = at_top.expert.steps.at(1);
+  ASSERT_EQ(down.site, "peg_grasp");
+  ASSERT_LT(down.offset[2], -0.02) << "the task's expert no longer grasps the peg below the site";
+  down.offset[2] = 0;
+  for (const bool middle : {true, false}) {
+    const auto task = middle ? scene.task : std::make_shared<const sim::Task>(at_top);
+    TwinActor actor(task, scene.proxy, look, true);
+    reality::Observation o = scene.proxy.Reset({seed, 3});
+    client.ResetGripper();
+    actor.Begin(seed);
+    // The peg's middle in the tool's frame, from when it is first lifted clear of the table.
+    std::optional<Eigen::Vector3d> lifted;
+    double moved = 0;
+    reality::RunOperator(scene.proxy, actor, client, o, scene.spec.horizon, true,
+                         [&](const reality::Observation&, const sim::Action&) {
+                           const core::Pose p = hidden.BodyPose(peg);
+                           if (p.translation.z() < 0.1 && !lifted) return;
+                           const Eigen::Vector3d in_tool = (hidden.EePose().Inverse() * p).translation;
+                           if (!lifted) lifted = in_tool;
+                           moved = std::max(moved, (in_tool - *lifted).norm());
+                         });
+    ASSERT_TRUE(lifted) << (middle ? "at the middle" : "at the top") << ": the peg was not lifted";
+    const bool success = scene.proxy.QuerySuccess() == reality::SuccessAnswer::kSuccess;
+    if (middle) {
+      EXPECT_LT(moved, 0.003) << "held at its middle, the peg moved in the fingers";
+      EXPECT_TRUE(success) << "held at its middle";
+    } else {
+      EXPECT_GT(moved, 0.005) << "held near its top, the peg did not turn in the fingers";
+      EXPECT_FALSE(success) << "held near its top";
     }
   }
 }
