@@ -44,6 +44,20 @@ struct Scene {
     }
     return estimator.Estimate(points);
   }
+  // One 640x480 frame from where the task camera is said to be.
+  Look TaskCameraLook() {
+    return FixedLook(proxy, camera.pose, ScaleIntrinsics(camera.intrinsics, 8));
+  }
+  // `actor` on the proxy reset with `seed` at `level`, for at most `steps` actions; `before_act`
+  // sees each observation and action.
+  void Run(TwinActor& actor, uint64_t seed, int level, int steps, bool with_frames,
+           const reality::BeforeAct& before_act = nullptr) {
+    reality::ActionClient client(proxy, spec.control.limits);
+    reality::Observation o = proxy.Reset({seed, level});
+    client.ResetGripper();
+    actor.Begin(seed);
+    reality::RunOperator(proxy, actor, client, o, steps, with_frames, before_act);
+  }
   sim::TaskSpec spec;
   std::shared_ptr<const sim::Task> task;
   reality::ProxyReality proxy;
@@ -55,8 +69,7 @@ struct Scene {
 // without the registration the estimates were 3-8 mm off).
 TEST(PoseEstimate, TheObjectsOnTheProxyTableToAFewMillimetres) {
   Scene scene("peg_insertion");
-  const Look look =
-      FixedLook(scene.proxy, scene.camera.pose, ScaleIntrinsics(scene.camera.intrinsics, 8));
+  const Look look = scene.TaskCameraLook();
   for (uint64_t seed : {100, 101, 102}) {
     const auto estimate = scene.Estimate(seed, look);
     ASSERT_EQ(estimate.size(), 2u);
@@ -74,8 +87,7 @@ TEST(PoseEstimate, TheObjectsOnTheProxyTableToAFewMillimetres) {
 TEST(PoseEstimate, NotFittedToATallerBoxOfTheClutter) {
   learn::PinMathThreads(1);
   Scene scene("peg_insertion");
-  const Look look =
-      FixedLook(scene.proxy, scene.camera.pose, ScaleIntrinsics(scene.camera.intrinsics, 8));
+  const Look look = scene.TaskCameraLook();
   for (uint64_t trial : {0, 1, 2}) {
     const auto estimate = scene.Estimate(core::MixSeed(5000, 2000 + trial), look, {}, 2);
     const sim::Env& hidden = scene.proxy.hidden_env();
@@ -93,8 +105,7 @@ TEST(PoseEstimate, NotFittedToATallerBoxOfTheClutter) {
 TEST(PoseEstimate, NotFittedToABoxOfTheClutterThatReturnsMorePoints) {
   learn::PinMathThreads(1);
   Scene scene("peg_insertion");
-  const Look look =
-      FixedLook(scene.proxy, scene.camera.pose, ScaleIntrinsics(scene.camera.intrinsics, 8));
+  const Look look = scene.TaskCameraLook();
   for (const auto& [seeds, trial] :
        std::vector<std::pair<uint64_t, uint64_t>>{{5000, 3}, {5000, 5}, {5000, 13}, {7000, 19}}) {
     const auto estimate = scene.Estimate(core::MixSeed(seeds, 2000 + trial), look, {}, 2);
@@ -113,8 +124,7 @@ TEST(PoseEstimate, NotFittedToABoxOfTheClutterThatReturnsMorePoints) {
 TEST(PoseEstimate, SettledOnTheDarkBlockWhereItsPointsAreNearest) {
   learn::PinMathThreads(1);
   Scene scene("peg_insertion");
-  const Look look =
-      FixedLook(scene.proxy, scene.camera.pose, ScaleIntrinsics(scene.camera.intrinsics, 8));
+  const Look look = scene.TaskCameraLook();
   const reality::Observation o = scene.proxy.Reset({core::MixSeed(5000, 1000 + 3), 1});
   PoseEstimateOptions unsettled;
   unsettled.settle = 0;
@@ -163,9 +173,7 @@ TEST(PoseEstimate, TheSameWhateverTheThreadCount) {
 TEST(TwinActorOnReality, InsertsThePegWhereTheEstimateSaysTheHoleIs) {
   learn::PinMathThreads(1);
   Scene scene("peg_insertion");
-  TwinActor actor(
-      scene.task, scene.proxy,
-      FixedLook(scene.proxy, scene.camera.pose, ScaleIntrinsics(scene.camera.intrinsics, 8)), true);
+  TwinActor actor(scene.task, scene.proxy, scene.TaskCameraLook(), true);
   reality::ActionClient client(scene.proxy, scene.spec.control.limits);
   int successes = 0;
   const int trials = 6;
@@ -202,16 +210,9 @@ TEST(TwinActorOnReality, CarriesTheSpatulaAndMeasuresHowFarItsBladeReaches) {
   RelookOptions relook;
   relook.measure_reach = true;
   relook.max_looks = 1;  // the scene once, then the spatula in the hand (not counted)
-  TwinActor actor(
-      scene.task, scene.proxy,
-      FixedLook(scene.proxy, scene.camera.pose, ScaleIntrinsics(scene.camera.intrinsics, 8)), true,
-      {}, {}, relook);
-  reality::ActionClient client(scene.proxy, scene.spec.control.limits);
-  reality::Observation o = scene.proxy.Reset({5000, 1});
-  client.ResetGripper();
-  actor.Begin(5000);
+  TwinActor actor(scene.task, scene.proxy, scene.TaskCameraLook(), true, {}, {}, relook);
   // Grasped by step 22; lifted toward the griddle, and looked at, by step 60.
-  reality::RunOperator(scene.proxy, actor, client, o, 60, false);
+  scene.Run(actor, 5000, 1, 60, false);
   const sim::Env& hidden = scene.proxy.hidden_env();
   const int real = mj_name2id(hidden.model(), mjOBJ_BODY, "spatula");
   const int twin = mj_name2id(actor.twin().model(), mjOBJ_BODY, "spatula");
@@ -237,19 +238,14 @@ TEST(TwinActorOnReality, CarriesTheSpatulaAndMeasuresHowFarItsBladeReaches) {
 TEST(TwinActorOnReality, LooksAgainAndFollowsAPushedBlock) {
   learn::PinMathThreads(1);
   Scene scene("peg_insertion");
-  const Look look =
-      FixedLook(scene.proxy, scene.camera.pose, ScaleIntrinsics(scene.camera.intrinsics, 8));
-  reality::ActionClient client(scene.proxy, scene.spec.control.limits);
+  const Look look = scene.TaskCameraLook();
   for (uint64_t trial : {5, 7}) {
     const uint64_t seed = core::MixSeed(5000, 3000 + trial);
     for (int max_looks : {1, 3}) {
       RelookOptions relook;
       relook.max_looks = max_looks;
       TwinActor actor(scene.task, scene.proxy, look, true, {}, {}, relook);
-      reality::Observation o = scene.proxy.Reset({seed, 3});
-      client.ResetGripper();
-      actor.Begin(seed);
-      reality::RunOperator(scene.proxy, actor, client, o, scene.spec.horizon, true);
+      scene.Run(actor, seed, 3, scene.spec.horizon, true);
       const bool success = scene.proxy.QuerySuccess() == reality::SuccessAnswer::kSuccess;
       if (max_looks == 1) {
         EXPECT_EQ(actor.looks(), 1);
@@ -274,9 +270,7 @@ TEST(TwinActorOnReality, LooksAgainAndFollowsAPushedBlock) {
 TEST(TwinActorOnReality, HoldsThePegAtItsMiddleWhereItDoesNotTurnInTheFingers) {
   learn::PinMathThreads(1);
   Scene scene("peg_insertion");
-  const Look look =
-      FixedLook(scene.proxy, scene.camera.pose, ScaleIntrinsics(scene.camera.intrinsics, 8));
-  reality::ActionClient client(scene.proxy, scene.spec.control.limits);
+  const Look look = scene.TaskCameraLook();
   const uint64_t seed = core::MixSeed(5000, 3000 + 4);
   const sim::Env& hidden = scene.proxy.hidden_env();
   const int peg = mj_name2id(hidden.model(), mjOBJ_BODY, "peg");
@@ -290,20 +284,17 @@ TEST(TwinActorOnReality, HoldsThePegAtItsMiddleWhereItDoesNotTurnInTheFingers) {
   for (const bool middle : {true, false}) {
     const auto task = middle ? scene.task : std::make_shared<const sim::Task>(at_top);
     TwinActor actor(task, scene.proxy, look, true);
-    reality::Observation o = scene.proxy.Reset({seed, 3});
-    client.ResetGripper();
-    actor.Begin(seed);
     // The peg's middle in the tool's frame, from when it is first lifted clear of the table.
     std::optional<Eigen::Vector3d> lifted;
     double moved = 0;
-    reality::RunOperator(scene.proxy, actor, client, o, scene.spec.horizon, true,
-                         [&](const reality::Observation&, const sim::Action&) {
-                           const core::Pose p = hidden.BodyPose(peg);
-                           if (p.translation.z() < 0.1 && !lifted) return;
-                           const Eigen::Vector3d in_tool = (hidden.EePose().Inverse() * p).translation;
-                           if (!lifted) lifted = in_tool;
-                           moved = std::max(moved, (in_tool - *lifted).norm());
-                         });
+    scene.Run(actor, seed, 3, scene.spec.horizon, true,
+              [&](const reality::Observation&, const sim::Action&) {
+                const core::Pose p = hidden.BodyPose(peg);
+                if (p.translation.z() < 0.1 && !lifted) return;
+                const Eigen::Vector3d in_tool = (hidden.EePose().Inverse() * p).translation;
+                if (!lifted) lifted = in_tool;
+                moved = std::max(moved, (in_tool - *lifted).norm());
+              });
     ASSERT_TRUE(lifted) << (middle ? "at the middle" : "at the top") << ": the peg was not lifted";
     const bool success = scene.proxy.QuerySuccess() == reality::SuccessAnswer::kSuccess;
     if (middle) {
