@@ -262,19 +262,21 @@ TEST(TwinActorOnReality, LooksAgainAndFollowsAPushedBlock) {
   }
 }
 
-// The proxy's pads hold the peg by friction. Grasped 1.5 cm below its top (at `peg_grasp`, as the
-// expert did until stop 49), the peg turns in the fingers as the arm stops over the hole and as
-// its tip drags on the block: in eval's level-3 trial 4 (seed 5000) its middle moved 8 mm
-// relative to the tool and the insertion failed. Grasped at its middle, as the task's expert now
-// does, it stays put and goes in. The twin's fingers hold the peg rigidly: only the proxy shows it.
-TEST(TwinActorOnReality, HoldsThePegAtItsMiddleWhereItDoesNotTurnInTheFingers) {
+// Each finger has two pads, one above the other, reaching 4.4 cm above the tool's point and 0.9 cm
+// below it. Grasped 1.5 cm below its top (at `peg_grasp`, as the expert did until stop 49), the
+// peg is held by the lower pads only, and on the proxy (whose gripper closes with 45 N where the
+// twin's does with 70) it slips in the fingers as the arm stops over the hole and as its tip drags
+// on the block: in eval's level-3 trial 4 (seed 5000) its tip moved 1 cm in the tool's frame and
+// the insertion failed. Grasped at its middle, as the task's expert now does, both pads hold it,
+// and it stays put and goes in.
+TEST(TwinActorOnReality, HoldsThePegAtItsMiddleWhereItDoesNotSlipInTheFingers) {
   learn::PinMathThreads(1);
   Scene scene("peg_insertion");
   const Look look = scene.TaskCameraLook();
   const uint64_t seed = core::MixSeed(5000, 3000 + 4);
   const sim::Env& hidden = scene.proxy.hidden_env();
-  const int peg = mj_name2id(hidden.model(), mjOBJ_BODY, "peg");
-  ASSERT_GE(peg, 0);
+  const int tip = mj_name2id(hidden.model(), mjOBJ_SITE, "peg_tip");
+  ASSERT_GE(tip, 0);
   // The grasp step: down to the peg (its offset from `peg_grasp`).
   sim::TaskSpec at_top = scene.spec;
   auto& down = at_top.expert.steps.at(1);
@@ -284,24 +286,24 @@ TEST(TwinActorOnReality, HoldsThePegAtItsMiddleWhereItDoesNotTurnInTheFingers) {
   for (const bool middle : {true, false}) {
     const auto task = middle ? scene.task : std::make_shared<const sim::Task>(at_top);
     TwinActor actor(task, scene.proxy, look, true);
-    // The peg's middle in the tool's frame, from when it is first lifted clear of the table.
+    // The peg's tip in the tool's frame, from when it is first lifted clear of the table.
     std::optional<Eigen::Vector3d> lifted;
     double moved = 0;
     scene.Run(actor, seed, 3, scene.spec.horizon, true,
               [&](const reality::Observation&, const sim::Action&) {
-                const core::Pose p = hidden.BodyPose(peg);
-                if (p.translation.z() < 0.1 && !lifted) return;
-                const Eigen::Vector3d in_tool = (hidden.EePose().Inverse() * p).translation;
+                const Eigen::Vector3d at = hidden.SitePose(tip).translation;
+                if (at.z() < 0.05 && !lifted) return;
+                const Eigen::Vector3d in_tool = hidden.EePose().Inverse() * at;
                 if (!lifted) lifted = in_tool;
                 moved = std::max(moved, (in_tool - *lifted).norm());
               });
     ASSERT_TRUE(lifted) << (middle ? "at the middle" : "at the top") << ": the peg was not lifted";
     const bool success = scene.proxy.QuerySuccess() == reality::SuccessAnswer::kSuccess;
     if (middle) {
-      EXPECT_LT(moved, 0.003) << "held at its middle, the peg moved in the fingers";
+      EXPECT_LT(moved, 0.003) << "held at its middle, the peg slipped in the fingers";
       EXPECT_TRUE(success) << "held at its middle";
     } else {
-      EXPECT_GT(moved, 0.005) << "held near its top, the peg did not turn in the fingers";
+      EXPECT_GT(moved, 0.006) << "held near its top, the peg did not slip in the fingers";
       EXPECT_FALSE(success) << "held near its top";
     }
   }
