@@ -322,9 +322,11 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model,
     int inliers = 0, outliers = 0;
     double squares = 0;
   };
-  // Score: points the surface explains, less the points inside its outline it does not.
+  // Score: points the surface explains, less the points inside its outline it does not. `paired`,
+  // if given, gets the points within the ICP's last reach of the surface.
   const auto score = [&](const core::Pose& pose, std::vector<Eigen::Vector3d>& local,
-                         std::vector<int>& index) {
+                         std::vector<int>& index,
+                         std::vector<Eigen::Vector3d>* paired = nullptr) {
     Result result;
     result.pose = pose;
     near(pose, options_.reach, local, index);
@@ -333,6 +335,7 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model,
     result.scored = true;
     for (std::size_t i = 0; i < local.size(); ++i) {
       const double e = (closest[i] - local[i]).norm();
+      if (paired && e <= options_.reach) paired->push_back(points[index[i]]);
       if (e <= options_.inlier) {
         ++result.inliers;
         result.squares += e * e;
@@ -408,13 +411,9 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model,
   if (options_.settle > 0) {
     // Settled among the points it pairs with (within the ICP's last reach: not the clutter or the
     // hand near it, which a settle would be drawn to), then scored again where it settles.
-    std::vector<Eigen::Vector3d> local;
+    std::vector<Eigen::Vector3d> local, paired;
     std::vector<int> index;
-    near(result.pose, options_.reach, local, index);
-    const std::vector<Eigen::Vector3d> closest = model.surface->Closest(local, 1);
-    std::vector<Eigen::Vector3d> paired;
-    for (std::size_t i = 0; i < local.size(); ++i)
-      if ((closest[i] - local[i]).norm() <= options_.reach) paired.push_back(points[index[i]]);
+    score(result.pose, local, index, &paired);
     if (!paired.empty())
       result = score(Settle(*model.surface, paired, result.pose, options_.settle, options_.reach),
                      local, index);
