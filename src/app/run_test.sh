@@ -86,7 +86,7 @@ grep -q '"co_train": false' "$d/run/config.json"
 steps=$(grep -o '"steps":[0-9]*' "$d/graded.jsonl" | awk -F: '{s += $2} END {print s + 0}')
 [ "$steps" -gt 0 ] && [ "$(wc -l < "$d/trace.jsonl")" -eq "$steps" ] ||
   { echo "trace: $(wc -l < "$d/trace.jsonl") lines for $steps steps" >&2; exit 1; }
-[ "$(grep -c '"action":"[^"]*".*"grader":{.*"tool":\[' "$d/trace.jsonl")" -eq "$steps" ]
+[ "$(grep -c '"action":"[^"]*".*"grader":{.*"q":\[[^]]*\].*"tool":\[.*"tool_quat":\[' "$d/trace.jsonl")" -eq "$steps" ]
 if "$tf" eval --policy "$d/run/policies/student.pt" --task open_drawer \
   --reality tcp://127.0.0.1:9 --grader-state --out "$d/refused.jsonl" 2> "$d/refused.log"; then
   echo "--grader-state accepted a real robot's address" >&2

@@ -202,12 +202,16 @@ RealityEvalReport EvaluateOperatorOnReality(reality::Robot& robot, const TrialOp
         const reality::BeforeAct trace_step = [&](const reality::Observation& seen,
                                                   const sim::Action& action) {
           const core::Vec3& t = seen.ee.translation;
-          nlohmann::json j = {{"level", level},
-                              {"trial", i},
-                              {"step", step++},
-                              {"action", sim::ToJson(action)},
-                              {"tool", {t.x(), t.y(), t.z()}},
-                              {"gripper_width", seen.gripper_width}};
+          const core::Quat& r = seen.ee.rotation;
+          nlohmann::json j = {
+              {"level", level},
+              {"trial", i},
+              {"step", step++},
+              {"action", sim::ToJson(action)},
+              {"tool", {t.x(), t.y(), t.z()}},
+              {"tool_quat", {r.w(), r.x(), r.y(), r.z()}},
+              {"q", std::vector<double>(seen.q.data(), seen.q.data() + seen.q.size())},
+              {"gripper_width", seen.gripper_width}};
           if (options.grader) j["grader"] = options.grader();
           trace << j.dump() << "\n";
         };
