@@ -2,6 +2,7 @@
 // camera, the twin's expert acting on them. The hidden world is read only to grade.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <optional>
 
 #include "learn/torch_runtime.h"
@@ -265,10 +266,12 @@ TEST(TwinActorOnReality, LooksAgainAndFollowsAPushedBlock) {
 // Each finger has two pads, one above the other, reaching 4.4 cm above the tool's point and 0.9 cm
 // below it. Grasped 1.5 cm below its top (at `peg_grasp`, as the expert did until stop 49), the
 // peg is held by the lower pads only, and on the proxy (whose gripper closes with 45 N where the
-// twin's does with 70) it slips in the fingers as the arm stops over the hole and as its tip drags
-// on the block: in eval's level-3 trial 4 (seed 5000) its tip moved 1 cm in the tool's frame and
-// the insertion failed. Grasped at its middle, as the task's expert now does, both pads hold it,
-// and it stays put and goes in.
+// twin's does with 70) it slipped in the fingers as the arm swung round with the wrist at its stop
+// (two finger directions, as until stop 50): in eval's level-3 trial 4 (seed 5000) its tip moved
+// 1 cm in the tool's frame and the insertion failed. Grasped at its middle, as the task's expert
+// now does, both pads hold it, and it stays put and goes in, the arm swinging as before. (With
+// four finger directions the arm no longer swings in this trial, and the peg held near its top
+// stays put too: docs/samrl.md, "the wrist at its limit".)
 TEST(TwinActorOnReality, HoldsThePegAtItsMiddleWhereItDoesNotSlipInTheFingers) {
   learn::PinMathThreads(1);
   Scene scene("peg_insertion");
@@ -277,14 +280,17 @@ TEST(TwinActorOnReality, HoldsThePegAtItsMiddleWhereItDoesNotSlipInTheFingers) {
   const sim::Env& hidden = scene.proxy.hidden_env();
   const int tip = mj_name2id(hidden.model(), mjOBJ_SITE, "peg_tip");
   ASSERT_GE(tip, 0);
-  // The grasp step: down to the peg (its offset from `peg_grasp`).
-  sim::TaskSpec at_top = scene.spec;
+  // Two finger directions; the grasp step down to the peg (its offset from `peg_grasp`) as the
+  // task has it, or to the site.
+  sim::TaskSpec two = scene.spec;
+  for (auto& step : two.expert.steps) step.symmetry = 2;
+  sim::TaskSpec at_top = two;
   auto& down = at_top.expert.steps.at(1);
   ASSERT_EQ(down.site, "peg_grasp");
   ASSERT_LT(down.offset[2], -0.02) << "the task's expert no longer grasps the peg below the site";
   down.offset[2] = 0;
   for (const bool middle : {true, false}) {
-    const auto task = middle ? scene.task : std::make_shared<const sim::Task>(at_top);
+    const auto task = std::make_shared<const sim::Task>(middle ? two : at_top);
     TwinActor actor(task, scene.proxy, look, true);
     // The peg's tip in the tool's frame, from when it is first lifted clear of the table.
     std::optional<Eigen::Vector3d> lifted;
@@ -305,6 +311,41 @@ TEST(TwinActorOnReality, HoldsThePegAtItsMiddleWhereItDoesNotSlipInTheFingers) {
     } else {
       EXPECT_GT(moved, 0.006) << "held near its top, the peg did not slip in the fingers";
       EXPECT_FALSE(success) << "held near its top";
+    }
+  }
+}
+
+// The peg is square, so the task's expert may turn the fingers to any of four directions across
+// the peg and the hole (`symmetry: 4`), and takes the nearest. With two (+-fingers, as until stop
+// 50), eval's level-3 trial 18 (seeds 7000) needed the wrist turned on past the grasp's turn: on
+// the proxy joint 7 ran to its stop, the other joints swung the arm round to make up the turn,
+// and the peg never went in. With four the wrist stays well off its stops and the peg goes in.
+TEST(TwinActorOnReality, TurnsTheWristToTheNearestOfTheFourWaysTheSquarePegFits) {
+  learn::PinMathThreads(1);
+  Scene scene("peg_insertion");
+  const Look look = scene.TaskCameraLook();
+  const uint64_t seed = core::MixSeed(7000, 3000 + 18);
+  sim::TaskSpec two = scene.spec;
+  for (auto& step : two.expert.steps) step.symmetry = 2;
+  const mjModel* m = scene.task->model();
+  const int joint = mj_name2id(m, mjOBJ_JOINT, "joint7");
+  ASSERT_GE(joint, 0);
+  const double lo = m->jnt_range[2 * joint], hi = m->jnt_range[2 * joint + 1];
+  for (const bool four : {true, false}) {
+    const auto task = four ? scene.task : std::make_shared<const sim::Task>(two);
+    TwinActor actor(task, scene.proxy, look, true);
+    double margin = hi - lo;  // the closest joint 7 came to a stop, as the robot reports it
+    scene.Run(actor, seed, 3, scene.spec.horizon, true,
+              [&](const reality::Observation& o, const sim::Action&) {
+                margin = std::min({margin, o.q[6] - lo, hi - o.q[6]});
+              });
+    const bool success = scene.proxy.QuerySuccess() == reality::SuccessAnswer::kSuccess;
+    if (four) {
+      EXPECT_GT(margin, 0.3) << "rad from joint 7's stops, four finger directions";
+      EXPECT_TRUE(success) << "four finger directions";
+    } else {
+      EXPECT_LT(margin, 0.05) << "rad from joint 7's stops, two finger directions";
+      EXPECT_FALSE(success) << "two finger directions";
     }
   }
 }

@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <numbers>
+#include <vector>
 
 #include "core/error.h"
 #include "core/thread_pool.h"
@@ -143,13 +144,24 @@ core::Pose ScriptedExpert::Target(const Env& env, const ExpertStep& step) {
     const core::Quat frame = step.world_orientation ? core::Quat::Identity() : anchor.rotation;
     const Eigen::Vector3d approach = frame * Eigen::Vector3d(step.approach.data());
     const Eigen::Vector3d fingers = frame * Eigen::Vector3d(step.fingers.data());
-    // A parallel gripper is symmetric: of the two finger directions take the one nearer the
-    // tool when the step starts, and keep it for the whole step.
-    const core::Quat a = ToolOrientation(approach, fingers),
-                     b = ToolOrientation(approach, -fingers);
-    if (first)
-      flip_fingers_ = core::AngleBetween(b, ee.rotation) < core::AngleBetween(a, ee.rotation);
-    target.rotation = flip_fingers_ ? b : a;
+    // A parallel gripper is symmetric, and so may be what it holds or aligns (a square peg):
+    // of the finger directions that serve alike take the one nearest the tool when the step
+    // starts, and keep it for the whole step. They come in opposite pairs.
+    std::vector<core::Quat> alike;
+    for (int k = 0; k < step.symmetry / 2; ++k) {
+      const Eigen::Vector3d turned =
+          k == 0 ? fingers : core::AxisAngle(approach, 2 * M_PI * k / step.symmetry) * fingers;
+      alike.push_back(ToolOrientation(approach, turned));
+      alike.push_back(ToolOrientation(approach, -turned));
+    }
+    if (first) {
+      finger_turn_ = 0;
+      for (int k = 1; k < int(alike.size()); ++k)
+        if (core::AngleBetween(alike[k], ee.rotation) <
+            core::AngleBetween(alike[finger_turn_], ee.rotation))
+          finger_turn_ = k;
+    }
+    target.rotation = alike[finger_turn_];
   }
   if (ids.carry >= 0) {
     // The target is for the carried site: place the tool so that, holding the object as it
@@ -300,7 +312,6 @@ Action ScriptedExpert::Act(const Env& env, core::Rng& rng) {
   }
   return HoldStill(env);
 }
-
 
 Action PerturbAction(Action action, const ActionLimits& limits, double noise, core::Rng& rng) {
   if (action.mode == ActionMode::kDiscrete) {

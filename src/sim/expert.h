@@ -48,7 +48,7 @@ class ScriptedExpert {
   int steps_in_step_ = 0;
   bool patient_ = false;
   core::Pose grasp_in_site_;     // drive steps: tool pose relative to the site at the step start
-  bool flip_fingers_ = false;    // move steps: which of the two finger directions to use
+  int finger_turn_ = 0;          // move steps: which of the step's finger directions to use
   double drive_sign_ = 1.0;      // drive steps: direction of travel of the joint
   bool at_grid_target_ = false;  // discrete: no move brings the tool closer to the target
   int last_move_ = -1;           // discrete: the previous motion of this step

@@ -172,6 +172,11 @@ struct ExpertStep {
   std::array<double, 3> offset{0, 0, 0};     // m, in the anchor's yaw frame
   std::array<double, 3> approach{0, 0, -1};  // tool z in the anchor frame (default: down)
   std::array<double, 3> fingers{0, 1, 0};    // tool y in the anchor frame (sign is free)
+  // move: how many finger directions serve alike, `fingers` turned about `approach` by every
+  // 1/symmetry of a turn: 2 (a parallel gripper: +-fingers) or, for a square peg or hole, 4. The
+  // one nearest the tool where the step starts is kept for the step, so the wrist turns at most
+  // half of 1/symmetry of a turn.
+  int symmetry = 2;
   bool world_orientation = false;            // orientation in the base frame, not the anchor's
   // move: a site on the held object; the step brings that site, not the tool, to the target
   // (an anchor on the held object itself is taken where the step starts).
@@ -211,6 +216,9 @@ struct ExpertStep {
     a("offset", offset);
     a("approach", approach);
     a("fingers", fingers);
+    a("symmetry", symmetry);
+    a.Require(symmetry >= 2 && symmetry % 2 == 0, "symmetry",
+              "an even number of finger directions (2: +-fingers; 4: also across)");
     a("world_orientation", world_orientation);
     a("carry", carry);
     a("keep_orientation", keep_orientation);

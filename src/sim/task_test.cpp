@@ -82,6 +82,16 @@ TEST(Task, MisspelledKeyAndBadRangeAreCaught) {
             std::string::npos);
 }
 
+// Finger directions come in opposite pairs (a parallel gripper): an odd count is refused, by
+// the step's field.
+TEST(Task, AnOddNumberOfFingerDirectionsIsRefused) {
+  const std::string e = ErrorOfEditedDrawerTask("offset: [-0.01, 0, 0.08], fingers: [1, 0, 0],",
+                                                "offset: [-0.01, 0, 0.08], fingers: [1, 0, 0], "
+                                                "symmetry: 3,");
+  EXPECT_NE(e.find("'expert.steps[0].symmetry'"), std::string::npos) << e;
+  EXPECT_NE(e.find("even number of finger directions"), std::string::npos) << e;
+}
+
 TEST(Task, MissingSceneFileIsNamed) {
   const std::string e = ErrorOfEditedDrawerTask("scene: scene.xml", "scene: nowhere.xml");
   EXPECT_NE(e.find("'scene'"), std::string::npos) << e;
