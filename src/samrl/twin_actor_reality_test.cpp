@@ -59,6 +59,13 @@ struct Scene {
     actor.Begin(seed);
     reality::RunOperator(proxy, actor, client, o, steps, with_frames, before_act);
   }
+  // The task with two finger directions (+-fingers) on every step, as the peg's expert had until
+  // stop 50.
+  sim::TaskSpec TwoFingerDirections() const {
+    sim::TaskSpec two = spec;
+    for (auto& step : two.expert.steps) step.symmetry = 2;
+    return two;
+  }
   sim::TaskSpec spec;
   std::shared_ptr<const sim::Task> task;
   reality::ProxyReality proxy;
@@ -282,8 +289,7 @@ TEST(TwinActorOnReality, HoldsThePegAtItsMiddleWhereItDoesNotSlipInTheFingers) {
   ASSERT_GE(tip, 0);
   // Two finger directions; the grasp step down to the peg (its offset from `peg_grasp`) as the
   // task has it, or to the site.
-  sim::TaskSpec two = scene.spec;
-  for (auto& step : two.expert.steps) step.symmetry = 2;
+  const sim::TaskSpec two = scene.TwoFingerDirections();
   sim::TaskSpec at_top = two;
   auto& down = at_top.expert.steps.at(1);
   ASSERT_EQ(down.site, "peg_grasp");
@@ -325,8 +331,7 @@ TEST(TwinActorOnReality, TurnsTheWristToTheNearestOfTheFourWaysTheSquarePegFits)
   Scene scene("peg_insertion");
   const Look look = scene.TaskCameraLook();
   const uint64_t seed = core::MixSeed(7000, 3000 + 18);
-  sim::TaskSpec two = scene.spec;
-  for (auto& step : two.expert.steps) step.symmetry = 2;
+  const sim::TaskSpec two = scene.TwoFingerDirections();
   const mjModel* m = scene.task->model();
   const int joint = mj_name2id(m, mjOBJ_JOINT, "joint7");
   ASSERT_GE(joint, 0);

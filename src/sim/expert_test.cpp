@@ -147,7 +147,7 @@ TEST(ScriptedExpert, SearchFindsAHoleTheBeliefMissed) {
 // quarter turn of the wrist on top of the grasp's: on the proxy joint 7 ran to its stop and the
 // peg never came square to the hole (docs/samrl.md, "the wrist at its limit"). Here the block is
 // turned from the peg by 1 and 1.5 rad either way: with four directions the wrist stays 0.4 rad
-// from its stops (0.83 when this was written) and every episode succeeds; with two it comes
+// from its stops (0.78 when this was written) and every episode succeeds; with two it comes
 // within 0.05 rad of a stop (0.02; the twin's stiff arm still gets the peg in, the proxy's did
 // not).
 TEST(ScriptedExpert, TheWristTurnsToTheNearestOfTheFingerDirectionsThatServeAlike) {
