@@ -52,6 +52,10 @@ void TwinActorCli::Add(CLI::App* c) {
               "twin actor: once the held object is lifted, look at it in the hand, measure how "
               "far it reaches toward the sites the expert carries on it (a spatula's blade tip) "
               "and move them there");
+  c->add_flag("--look-when-blocked,!--no-look-when-blocked", relook.look_when_blocked,
+              "twin actor: when the expert's search begins (the carried site blocked on the way "
+              "down), look again first if looks remain, and come over the hole again if it moved "
+              "(default on)");
   c->add_option("--max-move", relook.max_move,
                 "twin actor: m beyond which an object found is taken for a misfit (clutter taken "
                 "for it), not a push, and ignored")
@@ -120,6 +124,7 @@ TwinActorOnRobot::TwinActorOnRobot(reality::Robot& robot, const sim::TaskSpec& t
   header_["moved"] = cli.relook.moved;
   header_["max_move"] = cli.relook.max_move;
   if (cli.relook.measure_reach) header_["measure_reach"] = true;
+  header_["look_when_blocked"] = cli.relook.look_when_blocked;
   header_["capture"] = {capture.width, capture.height};
 }
 

@@ -252,20 +252,31 @@ reality::OperatorInput TwinActor::Next(const reality::Observation& o) {
   }
   input.kind = reality::OperatorInput::Kind::kAction;
   const int step = expert_.current_step();
+  const bool was_searching = expert_.searching();
   input.action = expert_.Act(env_, rng_);
-  // A step marked `look` just done: look again, and do it again if something moved under it.
-  const auto& steps = task_->spec().expert.steps;
-  for (int s = step; s < expert_.current_step() && looks_ < relook_.max_looks; ++s) {
-    if (!steps[s].look) continue;
+  // Look again; if an object moved under step `s`, do it again.
+  const auto look_again = [&](int s) {
     const double moved = LookAndEstimate(o);
-    if (moved >= relook_.moved) {
-      spdlog::info("twin actor: look {} found an object {:.0f} mm from where it was; step {} again",
-                   looks_, 1e3 * moved, s);
-      ++redone_;
-      expert_.Restart(s);
-      input.action = expert_.Act(env_, rng_);
+    if (moved < relook_.moved) return;
+    spdlog::info("twin actor: look {} found an object {:.0f} mm from where it was; step {} again",
+                 looks_, 1e3 * moved, s);
+    ++redone_;
+    expert_.Restart(s);
+    input.action = expert_.Act(env_, rng_);
+  };
+  // A step marked `look` just done.
+  const auto& steps = task_->spec().expert.steps;
+  for (int s = step; s < expert_.current_step() && looks_ < relook_.max_looks; ++s)
+    if (steps[s].look) {
+      look_again(s);
+      break;
     }
-    break;
+  // Blocked on the way down, before searching: the last step marked `look` again if needed.
+  if (relook_.look_when_blocked && !was_searching && expert_.searching() &&
+      looks_ < relook_.max_looks) {
+    int s = expert_.current_step();
+    while (s >= 0 && !steps[s].look) --s;
+    if (s >= 0) look_again(s);
   }
   // The first step that carried a site on the held object just done: look at it in the hand.
   if (relook_.measure_reach && !reach_measured_ && carried_ >= 0)

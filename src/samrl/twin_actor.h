@@ -57,12 +57,18 @@ struct RelookOptions {
   // farthest of its points that way) and move those sites there. A drawn spatula's blade may be
   // a centimetre short of the real one's.
   bool measure_reach = false;
+  // When a step's search begins (the carried site blocked on the way down: a peg standing on the
+  // block beside its hole), look again first, if looks remain: a push after the last look leaves
+  // the hole farther away than the search reaches. An object found moved, the last step marked
+  // `look` is done again.
+  bool look_when_blocked = true;
   template <class A>
   void Serialize(A& a) {
     a("max_looks", max_looks);
     a("moved", moved);
     a("max_move", max_move);
     a("measure_reach", measure_reach);
+    a("look_when_blocked", look_when_blocked);
     a.Require(max_looks >= 1, "max_looks", "at least the first look");
     a.Require(moved > 0 && max_move > moved, "moved", "0 < moved < max_move, in m");
   }

@@ -31,6 +31,9 @@ class ScriptedExpert {
   // Whether every step of the script has been done.
   bool finished() const { return step_ >= static_cast<int>(task_.spec().expert.steps.size()); }
   int current_step() const { return step_; }
+  // Whether the current step is searching for a hole: its carried site was blocked on the way
+  // down (a peg standing beside the hole), and the target walks the step's spiral.
+  bool searching() const { return spiral_ > 0; }
 
  private:
   // Pose the tool should reach for the current step, in the robot base frame.
