@@ -147,21 +147,24 @@ core::Pose ScriptedExpert::Target(const Env& env, const ExpertStep& step) {
     // A parallel gripper is symmetric, and so may be what it holds or aligns (a square peg):
     // of the finger directions that serve alike take the one nearest the tool when the step
     // starts, and keep it for the whole step. They come in opposite pairs.
-    std::vector<core::Quat> alike;
-    for (int k = 0; k < step.symmetry / 2; ++k) {
+    // Direction k is the (k / 2)-th turn of the fingers, reversed when k is odd.
+    const auto alike = [&](int k) {
       const Eigen::Vector3d turned =
-          k == 0 ? fingers : core::AxisAngle(approach, 2 * M_PI * k / step.symmetry) * fingers;
-      alike.push_back(ToolOrientation(approach, turned));
-      alike.push_back(ToolOrientation(approach, -turned));
-    }
+          core::AxisAngle(approach, 2 * M_PI * (k / 2) / step.symmetry) * fingers;
+      return ToolOrientation(approach, k % 2 == 0 ? turned : Eigen::Vector3d(-turned));
+    };
     if (first) {
       finger_turn_ = 0;
-      for (int k = 1; k < int(alike.size()); ++k)
-        if (core::AngleBetween(alike[k], ee.rotation) <
-            core::AngleBetween(alike[finger_turn_], ee.rotation))
+      double nearest = core::AngleBetween(alike(0), ee.rotation);
+      for (int k = 1; k < step.symmetry; ++k) {
+        const double angle = core::AngleBetween(alike(k), ee.rotation);
+        if (angle < nearest) {
           finger_turn_ = k;
+          nearest = angle;
+        }
+      }
     }
-    target.rotation = alike[finger_turn_];
+    target.rotation = alike(finger_turn_);
   }
   if (ids.carry >= 0) {
     // The target is for the carried site: place the tool so that, holding the object as it
