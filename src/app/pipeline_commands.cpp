@@ -87,7 +87,7 @@ void AddEval(CLI::App& parent, int& exit_code) {
       ->required();
   c->add_flag("--grader-state", cli->grader_state,
               "proxy worlds only, to diagnose failures: run the world in this process and log its "
-              "hidden end state (task joints, objects, gripper, tool) with each trial");
+              "hidden end state (task joints, object poses, gripper, tool) with each trial");
   c->add_option("--trace", cli->options.trace,
                 "also append every step of the trials run here (JSON lines: action, tool position, "
                 "gripper width; the hidden state too with --grader-state)");

@@ -82,7 +82,7 @@ grep -q '"co_train": false' "$d/run/config.json"
 "$tf" eval --policy "$d/run/policies/student.pt" --task open_drawer --reality proxy:open_drawer \
   --levels 1 --trials 2 --grader-state --trace "$d/trace.jsonl" --out "$d/graded.jsonl" \
   > /dev/null 2> "$d/graded.log"
-[ "$(grep -c '"grader":{.*"drawer_slide":' "$d/graded.jsonl")" -eq 2 ]
+[ "$(grep -c '"grader":{.*"drawer_slide":.*"object_quats":{"chest":\[[^]]*\]' "$d/graded.jsonl")" -eq 2 ]
 steps=$(grep -o '"steps":[0-9]*' "$d/graded.jsonl" | awk -F: '{s += $2} END {print s + 0}')
 [ "$steps" -gt 0 ] && [ "$(wc -l < "$d/trace.jsonl")" -eq "$steps" ] ||
   { echo "trace: $(wc -l < "$d/trace.jsonl") lines for $steps steps" >&2; exit 1; }

@@ -239,13 +239,19 @@ nlohmann::json ProxyReality::GraderState() const {
   const auto& index = task_->index();
   const core::Pose to_base = env_->base().Inverse();
   auto xyz = [](const Eigen::Vector3d& v) { return nlohmann::json{v.x(), v.y(), v.z()}; };
-  nlohmann::json joints = nlohmann::json::object(), objects = nlohmann::json::object();
+  nlohmann::json joints = nlohmann::json::object(), objects = nlohmann::json::object(),
+                 object_quats = nlohmann::json::object();
   for (size_t k = 0; k < index.state_joints.size(); ++k)
     joints[spec.joints[k]] = d->qpos[m->jnt_qposadr[index.state_joints[k]]];
-  for (size_t k = 0; k < index.object_bodies.size(); ++k)
+  for (size_t k = 0; k < index.object_bodies.size(); ++k) {
+    const double* q = d->xquat + 4 * index.object_bodies[k];
+    const core::Quat in_base = to_base.rotation * core::Quat(q[0], q[1], q[2], q[3]);
     objects[spec.objects[k]] = xyz(to_base * Eigen::Vector3d(d->xpos + 3 * index.object_bodies[k]));
+    object_quats[spec.objects[k]] = {in_base.w(), in_base.x(), in_base.y(), in_base.z()};
+  }
   return {{"joints", joints},
           {"objects", objects},
+          {"object_quats", object_quats},
           {"gripper", env_->FingerOpening()},
           {"tool", xyz(env_->EePose().translation)},
           {"success_closeness", env_->SuccessCloseness()}};
