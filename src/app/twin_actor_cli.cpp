@@ -56,6 +56,10 @@ void TwinActorCli::Add(CLI::App* c) {
               "twin actor: when the expert's search begins (the carried site blocked on the way "
               "down), look again first if looks remain, and come over the hole again if it moved "
               "(default on)");
+  c->add_option("--moved-when-blocked", relook.moved_when_blocked,
+                "twin actor: m an object must be found from where it was believed to count as "
+                "moved at the look when blocked (the belief is already known to be off there)")
+      ->check(CLI::PositiveNumber);
   c->add_option("--max-move", relook.max_move,
                 "twin actor: m beyond which an object found is taken for a misfit (clutter taken "
                 "for it), not a push, and ignored")
@@ -71,10 +75,12 @@ void TwinActorCli::Check(const std::string& command, const std::string& policy) 
   if ((look == "q") != !q.empty())
     throw core::Error(look == "q" ? command + " --look q: needs --q FILE (train samrl's q.pt)"
                                   : command + " --q: goes with --look q");
-  if (relook.moved >= relook.max_move)
-    throw core::Error(command + ": --moved (" + std::to_string(relook.moved) +
-                      " m) must be less than --max-move (" + std::to_string(relook.max_move) +
-                      " m)");
+  for (const auto& [flag, value] : {std::pair{"--moved", relook.moved},
+                                     std::pair{"--moved-when-blocked", relook.moved_when_blocked}})
+    if (value >= relook.max_move)
+      throw core::Error(command + ": " + flag + " (" + std::to_string(value) +
+                        " m) must be less than --max-move (" + std::to_string(relook.max_move) +
+                        " m)");
 }
 
 TwinActorOnRobot::TwinActorOnRobot(reality::Robot& robot, const sim::TaskSpec& task,
@@ -125,6 +131,7 @@ TwinActorOnRobot::TwinActorOnRobot(reality::Robot& robot, const sim::TaskSpec& t
   header_["max_move"] = cli.relook.max_move;
   if (cli.relook.measure_reach) header_["measure_reach"] = true;
   header_["look_when_blocked"] = cli.relook.look_when_blocked;
+  header_["moved_when_blocked"] = cli.relook.moved_when_blocked;
   header_["capture"] = {capture.width, capture.height};
 }
 

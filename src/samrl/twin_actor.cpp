@@ -140,7 +140,7 @@ LookContext TwinActor::Context(const reality::Observation& o) const {
   return context;
 }
 
-double TwinActor::LookAndEstimate(const reality::Observation& o) {
+double TwinActor::LookAndEstimate(const reality::Observation& o, double moved_bound) {
   const LookContext context = Context(o);
   const core::Pose held = carried_ >= 0 ? env_.BodyPose(bodies_[carried_]) : core::Pose{};
   std::vector<Eigen::Vector3d> points;
@@ -161,7 +161,7 @@ double TwinActor::LookAndEstimate(const reality::Observation& o) {
   for (std::size_t i = 0; i < bodies_.size(); ++i) {
     if (skip[i]) continue;
     const double d = (found[i].pose.translation - estimates_[i].pose.translation).head<2>().norm();
-    if (!first && (!found[i].seen || d < relook_.moved)) continue;
+    if (!first && (!found[i].seen || d < moved_bound)) continue;
     if (!first && d > relook_.max_move) {
       spdlog::info("twin actor: look {} fitted {} {:.0f} mm away, too far for a push; ignored",
                    looks_, found[i].body, 1e3 * d);
@@ -245,7 +245,7 @@ reality::OperatorInput TwinActor::Next(const reality::Observation& o) {
   env_.PoseRobot(o.q, 0.5 * o.gripper_width, closure_);
   const core::Pose tool = env_.EePose();
   if (carried_ >= 0) env_.PlaceBody(bodies_[carried_], tool * carried_in_tool_);
-  if (looks_ == 0) LookAndEstimate(o);
+  if (looks_ == 0) LookAndEstimate(o, relook_.moved);
   if (expert_.finished() && !policy_) {
     input.kind = reality::OperatorInput::Kind::kDone;
     return input;
@@ -254,10 +254,10 @@ reality::OperatorInput TwinActor::Next(const reality::Observation& o) {
   const int step = expert_.current_step();
   const bool was_searching = expert_.searching();
   input.action = expert_.Act(env_, rng_);
-  // Look again; if an object moved under step `s`, do it again.
-  const auto look_again = [&](int s) {
-    const double moved = LookAndEstimate(o);
-    if (moved < relook_.moved) return;
+  // Look again; if an object moved (by `bound` or more) under step `s`, do it again.
+  const auto look_again = [&](int s, double bound) {
+    const double moved = LookAndEstimate(o, bound);
+    if (moved < bound) return;
     spdlog::info("twin actor: look {} found an object {:.0f} mm from where it was; step {} again",
                  looks_, 1e3 * moved, s);
     ++redone_;
@@ -268,7 +268,7 @@ reality::OperatorInput TwinActor::Next(const reality::Observation& o) {
   const auto& steps = task_->spec().expert.steps;
   for (int s = step; s < expert_.current_step() && looks_ < relook_.max_looks; ++s)
     if (steps[s].look) {
-      look_again(s);
+      look_again(s, relook_.moved);
       break;
     }
   // Blocked on the way down, before searching: the last step marked `look` again if needed.
@@ -276,7 +276,7 @@ reality::OperatorInput TwinActor::Next(const reality::Observation& o) {
       looks_ < relook_.max_looks) {
     int s = expert_.current_step();
     while (s >= 0 && !steps[s].look) --s;
-    if (s >= 0) look_again(s);
+    if (s >= 0) look_again(s, relook_.moved_when_blocked);
   }
   // The first step that carried a site on the held object just done: look at it in the hand.
   if (relook_.measure_reach && !reach_measured_ && carried_ >= 0)

@@ -301,6 +301,38 @@ TEST(TwinActorOnReality, LooksAgainWhenBlockedAndFindsTheBlockShovedAfterTheLast
   }
 }
 
+// In eval's level-3 trial 3 (seed 5000) the shove moves the block 3 mm before the look from over
+// the hole. That look takes 3 mm for the estimate's scatter (under `moved`, 5 mm), and the peg comes
+// down on the rim, where the search by feel does not shift it: the tool moves, the peg slides up
+// to 3 mm in the fingers and stays where it stands. Blocked, the actor looks again, and there a
+// shift of 2.5 mm counts (`moved_when_blocked`): it follows the block, comes over the hole again
+// and the peg goes in. With 5 mm there too, the block stays where it was believed.
+TEST(TwinActorOnReality, BlockedItTakesASmallerShiftForAMove) {
+  learn::PinMathThreads(1);
+  Scene scene("peg_insertion");
+  const Look look = scene.TaskCameraLook();
+  const uint64_t seed = core::MixSeed(5000, 3000 + 3);
+  for (const double when_blocked : {RelookOptions{}.moved_when_blocked, 0.005}) {
+    RelookOptions relook;
+    relook.moved_when_blocked = when_blocked;
+    TwinActor actor(scene.task, scene.proxy, look, true, {}, {}, relook);
+    scene.Run(actor, seed, 3, scene.spec.horizon, true);
+    const bool success = scene.proxy.QuerySuccess() == reality::SuccessAnswer::kSuccess;
+    const double error =
+        SiteError(*scene.task, actor.estimates(), scene.proxy.hidden_env(), "hole_top");
+    EXPECT_EQ(actor.looks(), 3) << "the first, over the hole, and when blocked";
+    if (when_blocked < 0.003) {
+      EXPECT_EQ(actor.redone_steps(), 1);
+      EXPECT_TRUE(success) << "moved when blocked " << when_blocked;
+      EXPECT_LT(error, 0.002);
+    } else {
+      EXPECT_EQ(actor.redone_steps(), 0);
+      EXPECT_FALSE(success) << "moved when blocked " << when_blocked;
+      EXPECT_GT(error, 0.0025);
+    }
+  }
+}
+
 // Each finger has two pads, one above the other, reaching 4.4 cm above the tool's point and 0.9 cm
 // below it. Grasped 1.5 cm below its top (at `peg_grasp`, as the expert did until stop 49), the
 // peg is held by the lower pads only, and on the proxy (whose gripper closes with 45 N where the
