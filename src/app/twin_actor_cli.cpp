@@ -1,5 +1,6 @@
 #include "app/twin_actor_cli.h"
 
+#include "core/config.h"
 #include "core/error.h"
 #include "core/fs.h"
 #include "learn/imitate.h"
@@ -75,12 +76,8 @@ void TwinActorCli::Check(const std::string& command, const std::string& policy) 
   if ((look == "q") != !q.empty())
     throw core::Error(look == "q" ? command + " --look q: needs --q FILE (train samrl's q.pt)"
                                   : command + " --q: goes with --look q");
-  for (const auto& [flag, value] : {std::pair{"--moved", relook.moved},
-                                     std::pair{"--moved-when-blocked", relook.moved_when_blocked}})
-    if (value >= relook.max_move)
-      throw core::Error(command + ": " + flag + " (" + std::to_string(value) +
-                        " m) must be less than --max-move (" + std::to_string(relook.max_move) +
-                        " m)");
+  // The flags' values meet the checks a config file's would (--moved below --max-move, ...).
+  core::Validate(relook, command + "'s twin actor options");
 }
 
 TwinActorOnRobot::TwinActorOnRobot(reality::Robot& robot, const sim::TaskSpec& task,

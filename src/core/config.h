@@ -291,6 +291,13 @@ Json ToJson(const T& value) {
   return out;
 }
 
+// Runs the struct's checks (its Serialize's Require calls) on a value built in code, e.g. from
+// command-line flags; throws ConfigError naming `origin` and the field that fails.
+template <class T>
+void Validate(const T& value, const std::string& origin) {
+  ReadConfig<T>(ConfigDocument{ToJson(value), origin, {}});
+}
+
 // Writes the struct to a YAML/JSON file (by extension), atomically.
 template <class T>
 void SaveConfig(const std::filesystem::path& path, const T& value) {

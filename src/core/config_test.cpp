@@ -109,6 +109,22 @@ TEST(Config, ValidationFailureNamesField) {
             std::string::npos);
 }
 
+TEST(Config, ValidateChecksAValueBuiltInCode) {
+  Example e;
+  e.ranges = {{0, 1}};
+  EXPECT_NO_THROW(Validate(e, "flags"));
+  e.ranges[0].hi = -1;
+  try {
+    Validate(e, "eval's flags");
+    ADD_FAILURE() << "a range with hi < lo passed";
+  } catch (const ConfigError& error) {
+    EXPECT_EQ(error.file(), "eval's flags");
+    EXPECT_EQ(error.field(), "ranges[0].hi");
+    EXPECT_NE(std::string(error.what()).find("expected a value >= lo, got -1"), std::string::npos)
+        << error.what();
+  }
+}
+
 TEST(Config, UnknownFieldSuggestsTheClosestName) {
   const std::string message = ErrorOf("horizn: 3\n");
   EXPECT_NE(message.find("'horizn': unknown field"), std::string::npos) << message;
