@@ -229,11 +229,30 @@ std::vector<Eigen::Vector3d> ObjectPoseEstimator::Foreground(
     moved = real2sim::AlignToSurface(near_target, target, options_.register_reach,
                                      options_.register_samples, 1);
   }
-  if (correction) *correction = moved;
   std::vector<Eigen::Vector3d> points;
   points.reserve(frame_points.size());
   for (const auto& p : frame_points) points.push_back(moved * p);
-  const std::vector<double> d = real2sim::SurfaceDistances(points, background);
+  std::vector<double> d = real2sim::SurfaceDistances(points, background);
+  if (options_.register_reach > 0) {
+    // A registration that leaves fewer of the frame's points on the twin's fixed geometry than
+    // the frame as it came has slid (from a view showing little of the arm, one slid 75 mm and
+    // 26 deg, and left 81% of the frame in the foreground): the frame is kept as it came.
+    std::vector<double> as_came = real2sim::SurfaceDistances(frame_points, background);
+    const auto on_background = [&](const std::vector<double>& distance) {
+      return std::count_if(distance.begin(), distance.end(),
+                           [&](double e) { return e <= options_.background; });
+    };
+    if (on_background(as_came) > on_background(d)) {
+      spdlog::debug("pose estimate: registration by {:.1f} mm, {:.2f} deg put fewer points on the "
+                    "twin's fixed geometry; not used",
+                    1e3 * moved.translation.norm(),
+                    core::AngleBetween(moved.rotation, core::Quat::Identity()) * 180 / M_PI);
+      moved = core::Pose::Identity();
+      points = frame_points;
+      d.swap(as_came);
+    }
+  }
+  if (correction) *correction = moved;
   const auto& w = twin_->spec().workspace;
   const Eigen::Vector3d lo(w.min[0], w.min[1], w.min[2]), hi(w.max[0], w.max[1], w.max[2]);
   std::vector<Eigen::Vector3d> out;
@@ -241,6 +260,11 @@ std::vector<Eigen::Vector3d> ObjectPoseEstimator::Foreground(
     if (d[i] > options_.background && (points[i].array() >= lo.array()).all() &&
         (points[i].array() <= hi.array()).all())
       out.push_back(points[i]);
+  spdlog::debug("pose estimate: frame of {} points registered by {:.1f} mm, {:.2f} deg; {} in the "
+                "foreground",
+                frame_points.size(), 1e3 * moved.translation.norm(),
+                core::AngleBetween(moved.rotation, core::Quat::Identity()) * 180 / M_PI,
+                out.size());
   return out;
 }
 
