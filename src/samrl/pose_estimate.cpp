@@ -194,6 +194,14 @@ core::Pose ObjectPoseEstimator::NearestLookAlike(int i, const core::Pose& pose) 
   return best;
 }
 
+namespace {
+// How far a pose moves: "4.2 mm, 0.42 deg".
+std::string Magnitude(const core::Pose& p) {
+  return fmt::format("{:.1f} mm, {:.2f} deg", 1e3 * p.translation.norm(),
+                     core::AngleBetween(p.rotation, core::Quat::Identity()) * 180 / M_PI);
+}
+}  // namespace
+
 std::vector<Eigen::Vector3d> ObjectPoseEstimator::Foreground(
     const std::vector<Eigen::Vector3d>& frame_points, const sim::ArmVector& q, double gripper_width,
     core::Pose* correction, int held, const core::Pose& held_pose) {
@@ -243,10 +251,9 @@ std::vector<Eigen::Vector3d> ObjectPoseEstimator::Foreground(
                            [&](double e) { return e <= options_.background; });
     };
     if (on_background(as_came) > on_background(d)) {
-      spdlog::debug("pose estimate: registration by {:.1f} mm, {:.2f} deg put fewer points on the "
-                    "twin's fixed geometry; not used",
-                    1e3 * moved.translation.norm(),
-                    core::AngleBetween(moved.rotation, core::Quat::Identity()) * 180 / M_PI);
+      spdlog::debug("pose estimate: registration by {} put fewer points on the twin's fixed "
+                    "geometry; not used",
+                    Magnitude(moved));
       moved = core::Pose::Identity();
       points = frame_points;
       d.swap(as_came);
@@ -260,11 +267,8 @@ std::vector<Eigen::Vector3d> ObjectPoseEstimator::Foreground(
     if (d[i] > options_.background && (points[i].array() >= lo.array()).all() &&
         (points[i].array() <= hi.array()).all())
       out.push_back(points[i]);
-  spdlog::debug("pose estimate: frame of {} points registered by {:.1f} mm, {:.2f} deg; {} in the "
-                "foreground",
-                frame_points.size(), 1e3 * moved.translation.norm(),
-                core::AngleBetween(moved.rotation, core::Quat::Identity()) * 180 / M_PI,
-                out.size());
+  spdlog::debug("pose estimate: frame of {} points registered by {}; {} in the foreground",
+                frame_points.size(), Magnitude(moved), out.size());
   return out;
 }
 
