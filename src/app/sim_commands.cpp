@@ -25,21 +25,33 @@ struct ExpertOptions {
   int level = 1;
   uint64_t seed = 0;
   double noise = 0.0;
+  int optimize_moves = 0;  // iLQR iterations per free move (ScriptedExpert::set_planning)
   int threads = core::DefaultThreadCount();
   bool all_contacts = false;  // trace: every contact, not only the robot's
 };
 
-// --task, --level, --seed, --noise, and --episode for commands that show one episode.
+// --task, --level, --seed, --noise, --optimize-moves, and --episode for commands that show one
+// episode.
 void AddEpisodeOptions(CLI::App* command, ExpertOptions& o, bool one_episode) {
   command->add_option("--task", o.task, "built-in task name or task.yaml path");
   command->add_option("--level", o.level, "randomization level 0..3")->check(CLI::Range(0, 3));
   command->add_option("--seed", o.seed, "seed");
   command->add_option("--noise", o.noise, "expert action noise")->check(CLI::Range(0.0, 1.0));
+  AddOptimizeMovesOption(*command, o.optimize_moves);
   if (one_episode)
     command->add_option("--episode", o.episode, "episode index (sim expert lists failed ones)");
 }
 
 }  // namespace
+
+void AddOptimizeMovesOption(CLI::App& command, int& iterations) {
+  command
+      .add_option("--optimize-moves", iterations,
+                  "the expert plans each free move of a continuous task by this many iLQR "
+                  "iterations through the twin's own dynamics and follows the plan (0: the "
+                  "script's straight moves)")
+      ->check(CLI::Range(0, 1000));
+}
 
 void AddSimCommands(CLI::App& parent, int& exit_code) {
   auto* sim = parent.add_subcommand("sim", "run, measure and look at simulated tasks");
@@ -55,7 +67,8 @@ void AddSimCommands(CLI::App& parent, int& exit_code) {
   expert->callback([expert_options, &exit_code] {
     const auto& o = *expert_options;
     auto task = std::make_shared<const sim::Task>(sim::LoadTaskSpec(o.task));
-    const auto report = sim::EvaluateExpert(task, o.episodes, o.level, o.seed, o.noise, o.threads);
+    const auto report = sim::EvaluateExpert(task, o.episodes, o.level, o.seed, o.noise, o.threads,
+                                            o.optimize_moves);
     core::Json out = {{"task", task->spec().name},
                       {"level", o.level},
                       {"episodes", report.episodes},
@@ -137,6 +150,7 @@ void AddSimCommands(CLI::App& parent, int& exit_code) {
     auto task = std::make_shared<const sim::Task>(sim::LoadTaskSpec(o.task));
     sim::Env env(task);
     sim::ScriptedExpert expert(*task, o.noise);
+    expert.set_planning(o.optimize_moves);
     core::Rng rng = sim::BeginExpertEpisode(env, expert, o.seed, o.episode, o.level);
     std::vector<float> state(env.state_dim());
     for (int t = 0; t < task->spec().horizon; ++t) {
@@ -207,6 +221,7 @@ void AddSimCommands(CLI::App& parent, int& exit_code) {
     sim::Env env(task);
     sim::RayCaster caster(sim::MakeCamera(spec), env.model());
     sim::ScriptedExpert expert(*task, o.noise);
+    expert.set_planning(o.optimize_moves);
     core::Rng rng = sim::BeginExpertEpisode(env, expert, o.seed, o.episode, o.level);
     core::Image frame{spec.width, spec.height, 3, 8,
                       std::vector<uint8_t>(std::size_t(spec.width) * spec.height * 3)};

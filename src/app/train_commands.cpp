@@ -13,6 +13,7 @@
 #include "learn/imitate.h"
 #include "learn/ppo.h"
 #include "learn/rollout.h"
+#include "app/sim_commands.h"
 #include "sim/task.h"
 
 namespace twinforge::app {
@@ -325,6 +326,7 @@ void AddImitate(CLI::App& train, int& exit_code) {
                 "noise on the expert's actions (its labels stay clean): Gaussian, in units of the "
                 "per-step limits (discrete: the chance of a random move)")
       ->check(CLI::Range(0.0, 10.0));
+  AddOptimizeMovesOption(*c, o.optimize_moves);
   c->add_option("--level", o.level, "randomization level 0..3")->check(CLI::Range(0, 3));
   c->add_option("--eval-episodes", o.eval_episodes,
                 "episodes evaluating the learner after each round (0: none, keep the last)")
@@ -342,6 +344,8 @@ void AddImitate(CLI::App& train, int& exit_code) {
       rounds.push_back({{"round", row.round},
                         {"episodes", row.episodes},
                         {"successes", row.successes},
+                        {"planned_moves", row.planned_moves},
+                        {"failed_plans", row.failed_plans},
                         {"steps", row.steps},
                         {"loss", row.loss},
                         {"learner_success", row.learner}});

@@ -1,6 +1,7 @@
 #include "learn/imitate.h"
 
 #include <algorithm>
+#include <array>
 #include <fstream>
 
 #include "core/error.h"
@@ -27,20 +28,23 @@ struct Labelled {
 // Episodes 0 .. count - 1 of a round seeded `seed`: the expert (patient) acts with its action
 // perturbed by `noise` (sim::PerturbAction), and each state is labelled with the action it chose
 // there. Episode i starts as `sim expert`'s episode i of that seed; the steps are appended in
-// episode order, whatever the thread count. Returns the successes.
-int Gather(std::shared_ptr<const sim::Task> task, double noise, uint64_t seed, int level,
-           int64_t count, int threads, Labelled& data) {
+// episode order, whatever the thread count. Fills the round's successes and plans.
+void Gather(std::shared_ptr<const sim::Task> task, const ImitationOptions& options, uint64_t seed,
+            int64_t count, Labelled& data, ImitationRound& row) {
+  const double noise = options.noise;
   const bool discrete = task->spec().control.action == sim::ActionMode::kDiscrete;
   std::vector<Labelled> per_episode(count);
   std::vector<char> success(count, 0);
-  core::ThreadPool pool(threads);
+  core::ThreadPool pool(options.threads);
+  std::vector<std::array<int, 2>> plans(pool.size(), {0, 0});
   pool.ParallelRanges(count, [&](int block, int64_t begin, int64_t end) {
     sim::Env env(task, block);
     sim::ScriptedExpert expert(*task);
     expert.set_patient(true);
+    expert.set_planning(options.optimize_moves);
     const int state_dim = env.state_dim();
     for (int64_t j = begin; j < end; ++j) {
-      core::Rng rng = sim::BeginExpertEpisode(env, expert, seed, j, level);
+      core::Rng rng = sim::BeginExpertEpisode(env, expert, seed, j, options.level);
       Labelled& out = per_episode[j];
       out.state_dim = state_dim;
       out.label_dim = discrete ? 1 : sim::kContinuousActionDim;
@@ -62,7 +66,12 @@ int Gather(std::shared_ptr<const sim::Task> task, double noise, uint64_t seed, i
         if (r.done) break;
       }
     }
+    plans[block] = {expert.planned_moves(), expert.failed_plans()};
   });
+  for (const auto& p : plans) {
+    row.planned_moves += p[0];
+    row.failed_plans += p[1];
+  }
   int successes = 0;
   for (int64_t j = 0; j < count; ++j) {
     data.state_dim = per_episode[j].state_dim;
@@ -73,7 +82,7 @@ int Gather(std::shared_ptr<const sim::Task> task, double noise, uint64_t seed, i
                        per_episode[j].labels.end());
     successes += success[j];
   }
-  return successes;
+  row.successes = successes;
 }
 
 // The state's normalization from `data`: its mean and standard deviation, at least `floor`.
@@ -162,8 +171,7 @@ ImitationReport TrainImitation(std::shared_ptr<const sim::Task> task,
     row.round = round;
     row.episodes = options.episodes;
     const uint64_t seed = core::MixSeed(options.seed, uint64_t(round));
-    row.successes =
-        Gather(task, options.noise, seed, options.level, row.episodes, options.threads, data);
+    Gather(task, options, seed, row.episodes, data, row);
     if (round == 0) FitNormalization(net, data, options.std_floor);
     row.steps = long(data.size());
     row.loss = Train(net, adam, data, options.train_steps, options.batch, rng);

@@ -7,7 +7,10 @@
 #include <vector>
 
 #include "core/error.h"
+#include "core/log.h"
 #include "core/thread_pool.h"
+#include "sim/model.h"
+#include "sim/trajectory_optimizer.h"
 
 namespace twinforge::sim {
 
@@ -109,6 +112,90 @@ void ScriptedExpert::BeginStep(int step) {
   last_move_ = -1;
   at_grid_target_ = false;
   stalled_ = spiral_ = 0;
+  plan_.clear();
+}
+
+bool ScriptedExpert::Plans(const ExpertStep& step) const {
+  return plan_iterations_ > 0 && task_.spec().control.action == ActionMode::kContinuous &&
+         step.type == ExpertStepType::kMove && step.speed <= 0 && step.search <= 0;
+}
+
+std::vector<core::Pose> ScriptedExpert::PlanMove(const Env& env, const ExpertStep& step,
+                                                 const core::Pose& target) {
+  const mjModel* m = env.model();
+  const ControlSpec& control = task_.spec().control;
+  const int tool = task_.index().robot.ee_site;
+  const int carry = task_.index().expert_steps[step_].carry;
+  const core::Pose ee = env.EePose();
+  const double needed =
+      std::max((target.translation - ee.translation).norm() / control.limits.translation,
+               core::AngleBetween(target.rotation, ee.rotation) / control.limits.rotation);
+  const int steps = std::clamp(int(std::ceil(1.5 * needed)) + 1, 2, std::max(2, step.max_steps));
+  const core::Pose goal = env.base() * target;
+  // Holding something, the plan moves what it holds: the carried site to where the target puts
+  // it, through the grasp's own contacts.
+  Eigen::Vector3d site_goal = goal.translation;
+  if (carry >= 0)
+    site_goal = goal * (ee.rotation.conjugate() * (env.SitePose(carry).translation - ee.translation));
+  SiteReachCost cost(carry >= 0 ? carry : tool, site_goal);
+  cost.running = 0;
+  cost.terminal = 1e4;
+  cost.velocity = 1;
+  cost.motion = 1e-2;
+  cost.control = 1e-6;
+  cost.control_ref = Eigen::Map<const Eigen::VectorXd>(env.data()->ctrl, m->nu);
+  // A step's turn weighs as much as a step's move, as the script counts them.
+  const double turn = control.limits.translation / control.limits.rotation;
+  cost.Turn(tool, goal.rotation, turn * turn);
+  IlqrOptions options;
+  options.iterations = plan_iterations_;
+  options.linearize_every = control.substeps;  // the targets change once a control period
+  ++planned_moves_;
+  const int horizon = steps * control.substeps;
+  // Started from the arm's joint targets eased (minimum jerk) to the target's inverse kinematics.
+  const RobotIndex& robot = task_.index().robot;
+  const ArmVector q_goal = env.kinematics().SolveIk(env.ArmPositions(), target);
+  std::vector<double> initial;
+  initial.reserve(std::size_t(horizon) * m->nu);
+  for (int t = 0; t < horizon; ++t) {
+    const double x = double(t + 1) / horizon, ease = x * x * x * (10 - 15 * x + 6 * x * x);
+    const std::size_t row = initial.size();
+    initial.insert(initial.end(), env.data()->ctrl, env.data()->ctrl + m->nu);
+    for (int k = 0; k < kArmDof; ++k) {
+      double& u = initial[row + robot.arm_actuator[k]];
+      u += ease * (q_goal[k] - u);
+    }
+  }
+  IlqrResult result;
+  try {
+    result = OptimizeTrajectory(m, env.data(), cost, horizon, std::move(initial), options);
+  } catch (const core::NumericError& e) {
+    ++failed_plans_;
+    spdlog::debug("expert: step {} not planned ({}); moving as scripted", step_, e.what());
+    return {};
+  }
+  // The plan's tool pose at the end of each control step.
+  DataPtr d = MakeData(m);
+  mj_copyData(d.get(), m, env.data());
+  const core::Pose to_base = env.base().Inverse();
+  std::vector<core::Pose> plan;
+  for (int t = 0; t < horizon; ++t) {
+    std::copy_n(result.controls.data() + t * m->nu, m->nu, d->ctrl);
+    mj_step(m, d.get());
+    if ((t + 1) % control.substeps == 0) {
+      mj_kinematics(m, d.get());
+      double quat[4];
+      mju_mat2Quat(quat, d->site_xmat + 9 * tool);
+      plan.push_back(to_base *
+                     core::Pose{Eigen::Vector3d(d->site_xpos + 3 * tool), core::QuatFromMj(quat)});
+    }
+  }
+  spdlog::debug("expert: step {} planned over {} control steps in {} iterations, cost {:.4g} -> "
+                "{:.4g}; the plan ends {:.1f} mm and {:.3f} rad from the target",
+                step_, steps, result.iterations, result.costs.front(), result.costs.back(),
+                1e3 * (plan.back().translation - target.translation).norm(),
+                core::AngleBetween(plan.back().rotation, target.rotation));
+  return plan;
 }
 
 core::Pose ScriptedExpert::Target(const Env& env, const ExpertStep& step) {
@@ -274,6 +361,10 @@ Action ScriptedExpert::Act(const Env& env, core::Rng& rng) {
       }
       at_grid_target_ = false;
       core::Pose aim = target;
+      if (Plans(step)) {
+        if (steps_in_step_ == 0) plan_ = PlanMove(env, step, target);
+        if (steps_in_step_ < int(plan_.size())) aim = plan_[steps_in_step_];
+      }
       if (spiral_ > 0 && stalled_ > 0)  // searching, still blocked: press gently
         aim.translation.z() = std::max(aim.translation.z(), ee.translation.z() - kSearchPress);
       action = Toward(env, aim, closure);
@@ -335,7 +426,7 @@ core::Rng BeginExpertEpisode(Env& env, ScriptedExpert& expert, uint64_t seed, in
 }
 
 ExpertReport EvaluateExpert(std::shared_ptr<const Task> task, int episodes, int level,
-                            uint64_t seed, double noise, int threads) {
+                            uint64_t seed, double noise, int threads, int plan_iterations) {
   ExpertReport report;
   report.episodes = episodes;
   std::vector<int> steps_to_success(episodes, -1);
@@ -344,6 +435,7 @@ ExpertReport EvaluateExpert(std::shared_ptr<const Task> task, int episodes, int 
   pool.ParallelRanges(episodes, [&](int block, int64_t begin, int64_t end) {
     Env env(task, block);
     ScriptedExpert expert(*task, noise);
+    expert.set_planning(plan_iterations);
     for (int64_t i = begin; i < end; ++i) {
       core::Rng rng = BeginExpertEpisode(env, expert, seed, i, level);
       for (int t = 0; t < task->spec().horizon; ++t) {

@@ -23,6 +23,17 @@ class ScriptedExpert {
   // noise keeps it from getting there, and for the gripper as the script last commanded it, not
   // as the gripper is.
   void set_patient(bool patient) { patient_ = patient; }
+  // Plans each free move of a continuous task (a move step with no speed limit and no hole
+  // search) by trajectory optimization through the env's own model, SAM-RL's optimized teacher:
+  // `iterations` of iLQR on MuJoCo's finite-differenced derivatives (sim/trajectory_optimizer.h)
+  // bring the moved site (the carried one, or the tool) to the step's target and turn the tool to
+  // its orientation, with the least joint motion over 1.5 times the control steps the move needs
+  // at the action limits. The expert then aims at the plan's tool pose of each control step in
+  // turn, and finishes the move as scripted. 0 (the default): every move as scripted.
+  void set_planning(int iterations) { plan_iterations_ = iterations; }
+  // Moves planned so far, and of them those whose optimization failed (moved as scripted).
+  int planned_moves() const { return planned_moves_; }
+  int failed_plans() const { return failed_plans_; }
   // Goes back to the start of step `step` (a step done again: the scene changed under it).
   // Throws core::Error for a step the script does not have.
   void Restart(int step);
@@ -42,6 +53,11 @@ class ScriptedExpert {
   // at_grid_target_ when no move helps.
   Action Toward(const Env& env, const core::Pose& target, double closure);
   Action HoldStill(const Env& env) const;
+  // Whether set_planning applies to `step`; the planned tool poses of a move to `target`, one
+  // per control step (empty when the optimization failed).
+  bool Plans(const ExpertStep& step) const;
+  std::vector<core::Pose> PlanMove(const Env& env, const ExpertStep& step,
+                                   const core::Pose& target);
   void Advance();
   void BeginStep(int step);  // the step's own state cleared
 
@@ -62,6 +78,9 @@ class ScriptedExpert {
   double last_height_ = 0;
   int stalled_ = 0;
   int spiral_ = 0;
+  int plan_iterations_ = 0;
+  int planned_moves_ = 0, failed_plans_ = 0;
+  std::vector<core::Pose> plan_;  // the current move's planned tool poses
 };
 
 // `action` with noise: a random move with probability `noise` (discrete), or Gaussian noise of
@@ -94,7 +113,8 @@ core::Rng BeginExpertEpisode(Env& env, ScriptedExpert& expert, uint64_t seed, in
 // Runs the expert for `episodes` episodes at `level` (episode i begun by BeginExpertEpisode),
 // spread over `threads` threads with one env per thread. An episode succeeds when the success
 // predicates hold at any step; it ends there.
+// `plan_iterations` > 0: the expert plans its free moves (ScriptedExpert::set_planning).
 ExpertReport EvaluateExpert(std::shared_ptr<const Task> task, int episodes, int level,
-                            uint64_t seed, double noise, int threads);
+                            uint64_t seed, double noise, int threads, int plan_iterations = 0);
 
 }  // namespace twinforge::sim

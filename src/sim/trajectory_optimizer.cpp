@@ -107,16 +107,41 @@ double SiteReachCost::Distance(const mjData* d) const {
   return (Eigen::Map<const Eigen::Vector3d>(d->site_xpos + 3 * site_) - goal_).norm();
 }
 
+namespace {
+
+// The rotation taking `goal` to a site's orientation, as a world-frame rotation vector.
+Eigen::Vector3d TurnError(const mjData* d, int site, const Eigen::Quaterniond& goal) {
+  const Eigen::Matrix3d r = Eigen::Map<const RowMatrix>(d->site_xmat + 9 * site, 3, 3);
+  const Eigen::AngleAxisd turn(Eigen::Quaterniond(r) * goal.conjugate());
+  return turn.angle() * turn.axis();
+}
+
+}  // namespace
+
+double SiteReachCost::Angle(const mjData* d) const {
+  return turn_site_ < 0 ? 0.0 : TurnError(d, turn_site_, turn_goal_).norm();
+}
+
 double SiteReachCost::SiteTerm(const mjModel* m, const mjData* d, double weight,
                                CostModel* model) const {
+  if (weight == 0) return 0;
   const Eigen::Vector3d r = Eigen::Map<const Eigen::Vector3d>(d->site_xpos + 3 * site_) - goal_;
+  const bool turn = turn_site_ >= 0 && turn_weight_ > 0;
+  const Eigen::Vector3d e = turn ? TurnError(d, turn_site_, turn_goal_) : Eigen::Vector3d::Zero();
   if (model) {
+    // Gauss-Newton on both residuals: the position's through the site's Jacobian, the angle's
+    // (small, or near enough) through the turned site's rotational one.
     RowMatrix jac(3, m->nv);
     mj_jacSite(m, const_cast<mjData*>(d), jac.data(), nullptr, site_);
     model->lx.head(m->nv) += 2 * weight * jac.transpose() * r;
     model->lxx.topLeftCorner(m->nv, m->nv) += 2 * weight * jac.transpose() * jac;
+    if (turn) {
+      mj_jacSite(m, const_cast<mjData*>(d), nullptr, jac.data(), turn_site_);
+      model->lx.head(m->nv) += 2 * weight * turn_weight_ * jac.transpose() * e;
+      model->lxx.topLeftCorner(m->nv, m->nv) += 2 * weight * turn_weight_ * jac.transpose() * jac;
+    }
   }
-  return weight * r.squaredNorm();
+  return weight * (r.squaredNorm() + turn_weight_ * e.squaredNorm());
 }
 
 double SiteReachCost::Running(const mjModel* m, const mjData* d, const double* u, int,
@@ -124,11 +149,15 @@ double SiteReachCost::Running(const mjModel* m, const mjData* d, const double* u
   const Eigen::Map<const Eigen::VectorXd> uu(u, m->nu);
   const Eigen::VectorXd du =
       control_ref.size() == m->nu ? Eigen::VectorXd(uu - control_ref) : Eigen::VectorXd(uu);
+  const Eigen::Map<const Eigen::VectorXd> qvel(d->qvel, m->nv);
   if (model) {
     model->lu += 2 * control * du;
     model->luu.diagonal().array() += 2 * control;
+    model->lx.segment(m->nv, m->nv) += 2 * motion * qvel;
+    model->lxx.block(m->nv, m->nv, m->nv, m->nv).diagonal().array() += 2 * motion;
   }
-  return SiteTerm(m, d, running, model) + control * du.squaredNorm();
+  return SiteTerm(m, d, running, model) + control * du.squaredNorm() +
+         motion * qvel.squaredNorm();
 }
 
 double SiteReachCost::Terminal(const mjModel* m, const mjData* d, CostModel* model) const {
@@ -160,6 +189,8 @@ IlqrResult OptimizeTrajectory(const mjModel* m, const mjData* start, const Traje
   const int nu = m->nu, n = StateDim(m);
   if (nu == 0) throw core::Error("trajectory optimization: the model has no actuators");
   if (horizon <= 0) throw core::Error("trajectory optimization: the horizon must be positive");
+  if (options.linearize_every <= 0)
+    throw core::Error("trajectory optimization: linearize_every must be positive");
   if (initial.empty())
     for (int t = 0; t < horizon; ++t) initial.insert(initial.end(), start->ctrl, start->ctrl + nu);
   if (int(initial.size()) != horizon * nu)
@@ -197,8 +228,13 @@ IlqrResult OptimizeTrajectory(const mjModel* m, const mjData* start, const Traje
       std::copy_n(nominal.controls.data() + t * nu, nu, d->ctrl);
       mj_forward(m, d.get());
       cost.Running(m, d.get(), nominal.controls.data() + t * nu, t, &models[t]);
-      mjd_transitionFD(m, d.get(), options.fd_epsilon, options.fd_centered, A[t].data(),
-                       B[t].data(), nullptr, nullptr);
+      if (t % options.linearize_every == 0) {
+        mjd_transitionFD(m, d.get(), options.fd_epsilon, options.fd_centered, A[t].data(),
+                         B[t].data(), nullptr, nullptr);
+      } else {
+        A[t] = A[t - 1];
+        B[t] = B[t - 1];
+      }
     }
 
     // Backward pass, raising the regularization until every Quu is positive definite.

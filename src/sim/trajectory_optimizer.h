@@ -34,23 +34,36 @@ class TrajectoryCost {
 };
 
 // Bring a site to a goal position (world frame): running weight * |p - goal|^2 + control * |u -
-// control_ref|^2 at every step, terminal weight * |p - goal|^2 + velocity * |qvel|^2 at the end.
+// control_ref|^2 + motion * |qvel|^2 at every step, terminal weight * |p - goal|^2 + velocity *
+// |qvel|^2 at the end. With running 0 and some motion, the site gets there by the least motion
+// spread over the horizon, rather than as fast as the actuators allow.
 class SiteReachCost : public TrajectoryCost {
  public:
   SiteReachCost(int site, const Eigen::Vector3d& goal) : site_(site), goal_(goal) {}
-  double running = 1.0, terminal = 100.0, control = 1e-3, velocity = 1.0;
+  double running = 1.0, terminal = 100.0, control = 1e-3, velocity = 1.0, motion = 0.0;
   Eigen::VectorXd control_ref;  // empty: zero
+  // Also turn a site (the same one, or the tool while the reached site is on what it holds) to
+  // `goal` (world frame): `weight` * angle^2 (rad^2) added to each position term, at its scale.
+  void Turn(int site, const Eigen::Quaterniond& goal, double weight) {
+    turn_site_ = site;
+    turn_goal_ = goal.normalized();
+    turn_weight_ = weight;
+  }
 
   double Running(const mjModel* m, const mjData* d, const double* u, int t,
                  CostModel* model) const override;
   double Terminal(const mjModel* m, const mjData* d, CostModel* model) const override;
-  // Distance of the site from the goal in state `d`.
+  // Distance of the site from the goal in state `d`; angle of the turned site from its goal.
   double Distance(const mjData* d) const;
+  double Angle(const mjData* d) const;
 
  private:
   double SiteTerm(const mjModel* m, const mjData* d, double weight, CostModel* model) const;
   int site_;
   Eigen::Vector3d goal_;
+  int turn_site_ = -1;
+  Eigen::Quaterniond turn_goal_ = Eigen::Quaterniond::Identity();
+  double turn_weight_ = 0;
 };
 
 struct IlqrOptions {
@@ -63,6 +76,11 @@ struct IlqrOptions {
   // A step is taken when it lowers the cost by at least this share of the decrease the
   // quadratic model predicts for it (Armijo).
   double min_reduction_ratio = 1e-4;
+  // The dynamics are linearized (mjd_transitionFD, 2 nv + na + nu steps each) at every this-many
+  // steps and held between: what costs most, for a horizon of many short physics steps under
+  // controls that change slowly (a servo's targets, one per control period). The line search
+  // still rolls the true dynamics out, so a step is taken only when it really lowers the cost.
+  int linearize_every = 1;
 };
 
 struct IlqrResult {

@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 #include "core/error.h"
 #include "sim/model.h"
 
@@ -58,6 +60,48 @@ TEST(TrajectoryOptimizer, IlqrLowersTheCostOfAReach) {
   mj_forward(m.get(), d.get());
   EXPECT_LT(cost.Distance(d.get()), 0.02);
   EXPECT_GT(cost.Distance(start.get()), 0.3);
+}
+
+// The tip to a goal and turned to an orientation there (the planar arm turns about y): the turn
+// costs as the cost says, and the optimized reach ends near both. Linearized every 5 steps only
+// (IlqrOptions::linearize_every), the same reach still ends there.
+TEST(TrajectoryOptimizer, IlqrTurnsASiteAndMayLinearizeEveryFewSteps) {
+  ModelPtr m = LoadModelFromText(kArm);
+  DataPtr start = MakeData(m.get());
+  mj_forward(m.get(), start.get());
+  const int tip = mj_name2id(m.get(), mjOBJ_SITE, "tip");
+  // Shoulder 0.6 rad and elbow 0.9 rad put the tip here, turned -1.5 rad about y.
+  const double q1 = 0.6, q2 = 0.9;
+  const Eigen::Vector3d goal(0.3 * std::cos(q1) + 0.3 * std::cos(q1 + q2), 0,
+                             -0.3 * std::sin(q1) - 0.3 * std::sin(q1 + q2));
+  const Eigen::Quaterniond turned(Eigen::AngleAxisd(q1 + q2, Eigen::Vector3d::UnitY()));
+  SiteReachCost cost(tip, goal);
+  cost.Turn(tip, turned, 0.05);
+  EXPECT_NEAR(cost.Angle(start.get()), q1 + q2, 1e-9);
+  EXPECT_NEAR(cost.Terminal(m.get(), start.get(), nullptr),
+              cost.terminal * ((cost.Distance(start.get()) * cost.Distance(start.get())) +
+                               0.05 * (q1 + q2) * (q1 + q2)),
+              1e-9);
+  for (int every : {1, 5}) {
+    IlqrOptions options;
+    options.iterations = 100;
+    options.tolerance = 1e-4;
+    options.linearize_every = every;
+    const IlqrResult r = OptimizeTrajectory(m.get(), start.get(), cost, 80, {}, options);
+    EXPECT_LT(r.costs.back(), 0.05 * r.costs.front()) << "linearized every " << every;
+    DataPtr d = MakeData(m.get());
+    mj_copyData(d.get(), m.get(), start.get());
+    for (int t = 0; t < 80; ++t) {
+      for (int i = 0; i < m->nu; ++i) d->ctrl[i] = r.controls[t * m->nu + i];
+      mj_step(m.get(), d.get());
+    }
+    mj_forward(m.get(), d.get());
+    EXPECT_LT(cost.Distance(d.get()), 0.03) << "linearized every " << every;
+    EXPECT_LT(cost.Angle(d.get()), 0.1) << "linearized every " << every;
+  }
+  IlqrOptions never;
+  never.linearize_every = 0;
+  EXPECT_THROW(OptimizeTrajectory(m.get(), start.get(), cost, 10, {}, never), core::Error);
 }
 
 TEST(TrajectoryOptimizer, BadControlsAreNamed) {
