@@ -75,6 +75,8 @@ void AddSimCommands(CLI::App& parent, int& exit_code) {
                       {"successes", report.successes},
                       {"success_rate", report.success_rate()},
                       {"mean_steps_to_success", report.mean_steps_to_success},
+                      {"planned_moves", report.planned_moves},
+                      {"failed_plans", report.failed_plans},
                       {"failed_episodes", report.failed_seeds}};
     std::cout << out.dump(2) << std::endl;
     exit_code = 0;

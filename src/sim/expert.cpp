@@ -431,6 +431,7 @@ ExpertReport EvaluateExpert(std::shared_ptr<const Task> task, int episodes, int 
   report.episodes = episodes;
   std::vector<int> steps_to_success(episodes, -1);
   core::ThreadPool pool(threads);
+  std::vector<std::array<int, 2>> plans(pool.size(), {0, 0});
   // Each range builds one env; each episode depends only on its seed.
   pool.ParallelRanges(episodes, [&](int block, int64_t begin, int64_t end) {
     Env env(task, block);
@@ -447,7 +448,12 @@ ExpertReport EvaluateExpert(std::shared_ptr<const Task> task, int episodes, int 
         if (r.done) break;
       }
     }
+    plans[block] = {expert.planned_moves(), expert.failed_plans()};
   });
+  for (const auto& p : plans) {
+    report.planned_moves += p[0];
+    report.failed_plans += p[1];
+  }
   double total = 0;
   for (int i = 0; i < episodes; ++i) {
     if (steps_to_success[i] > 0) {
