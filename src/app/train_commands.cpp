@@ -4,6 +4,7 @@
 #include <memory>
 #include <nlohmann/json.hpp>
 
+#include "app/sim_commands.h"
 #include "core/error.h"
 #include "core/log.h"
 #include "learn/bc.h"
@@ -13,7 +14,6 @@
 #include "learn/imitate.h"
 #include "learn/ppo.h"
 #include "learn/rollout.h"
-#include "app/sim_commands.h"
 #include "sim/task.h"
 
 namespace twinforge::app {

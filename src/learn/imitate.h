@@ -86,11 +86,11 @@ struct ImitationOptions {
 
 struct ImitationRound {
   int round = 0;
-  int episodes = 0;     // run this round
-  int successes = 0;    // of them, by the noisy expert
+  int episodes = 0;                         // run this round
+  int successes = 0;                        // of them, by the noisy expert
   int planned_moves = 0, failed_plans = 0;  // optimize_moves: the round's plans, failed ones
-  long steps = 0;       // labelled steps gathered so far (all rounds)
-  double loss = 0;      // mean training loss over the round's last 100 steps
+  long steps = 0;                           // labelled steps gathered so far (all rounds)
+  double loss = 0;                          // mean training loss over the round's last 100 steps
   double learner = -1;  // the learner's success in the twin afterwards (-1: not evaluated)
   double seconds = 0;   // since the start
 };

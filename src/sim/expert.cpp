@@ -136,7 +136,8 @@ std::vector<core::Pose> ScriptedExpert::PlanMove(const Env& env, const ExpertSte
   // it, through the grasp's own contacts.
   Eigen::Vector3d site_goal = goal.translation;
   if (carry >= 0)
-    site_goal = goal * (ee.rotation.conjugate() * (env.SitePose(carry).translation - ee.translation));
+    site_goal =
+        goal * (ee.rotation.conjugate() * (env.SitePose(carry).translation - ee.translation));
   SiteReachCost cost(carry >= 0 ? carry : tool, site_goal);
   cost.running = 0;
   cost.terminal = 1e4;
@@ -190,11 +191,12 @@ std::vector<core::Pose> ScriptedExpert::PlanMove(const Env& env, const ExpertSte
                      core::Pose{Eigen::Vector3d(d->site_xpos + 3 * tool), core::QuatFromMj(quat)});
     }
   }
-  spdlog::debug("expert: step {} planned over {} control steps in {} iterations, cost {:.4g} -> "
-                "{:.4g}; the plan ends {:.1f} mm and {:.3f} rad from the target",
-                step_, steps, result.iterations, result.costs.front(), result.costs.back(),
-                1e3 * (plan.back().translation - target.translation).norm(),
-                core::AngleBetween(plan.back().rotation, target.rotation));
+  spdlog::debug(
+      "expert: step {} planned over {} control steps in {} iterations, cost {:.4g} -> "
+      "{:.4g}; the plan ends {:.1f} mm and {:.3f} rad from the target",
+      step_, steps, result.iterations, result.costs.front(), result.costs.back(),
+      1e3 * (plan.back().translation - target.translation).norm(),
+      core::AngleBetween(plan.back().rotation, target.rotation));
   return plan;
 }
 

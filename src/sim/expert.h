@@ -100,8 +100,8 @@ struct ExpertReport {
   int episodes = 0;
   int successes = 0;
   double success_rate() const { return episodes ? double(successes) / episodes : 0.0; }
-  double mean_steps_to_success = 0;  // over successful episodes
-  std::vector<int> failed_seeds;     // episode seeds that failed, to replay them
+  double mean_steps_to_success = 0;         // over successful episodes
+  std::vector<int> failed_seeds;            // episode seeds that failed, to replay them
   int planned_moves = 0, failed_plans = 0;  // with planning (ScriptedExpert::set_planning)
 };
 

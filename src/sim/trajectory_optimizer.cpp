@@ -156,8 +156,7 @@ double SiteReachCost::Running(const mjModel* m, const mjData* d, const double* u
     model->lx.segment(m->nv, m->nv) += 2 * motion * qvel;
     model->lxx.block(m->nv, m->nv, m->nv, m->nv).diagonal().array() += 2 * motion;
   }
-  return SiteTerm(m, d, running, model) + control * du.squaredNorm() +
-         motion * qvel.squaredNorm();
+  return SiteTerm(m, d, running, model) + control * du.squaredNorm() + motion * qvel.squaredNorm();
 }
 
 double SiteReachCost::Terminal(const mjModel* m, const mjData* d, CostModel* model) const {
