@@ -25,7 +25,7 @@ struct ExpertOptions {
   int level = 1;
   uint64_t seed = 0;
   double noise = 0.0;
-  int optimize_moves = 0;  // iLQR iterations per free move (ScriptedExpert::set_planning)
+  sim::PlanOptions plan;  // the expert's planned moves (ScriptedExpert::set_planning)
   int threads = core::DefaultThreadCount();
   bool all_contacts = false;  // trace: every contact, not only the robot's
 };
@@ -37,20 +37,26 @@ void AddEpisodeOptions(CLI::App* command, ExpertOptions& o, bool one_episode) {
   command->add_option("--level", o.level, "randomization level 0..3")->check(CLI::Range(0, 3));
   command->add_option("--seed", o.seed, "seed");
   command->add_option("--noise", o.noise, "expert action noise")->check(CLI::Range(0.0, 1.0));
-  AddOptimizeMovesOption(*command, o.optimize_moves);
+  AddOptimizeMovesOption(*command, o.plan);
   if (one_episode)
     command->add_option("--episode", o.episode, "episode index (sim expert lists failed ones)");
 }
 
 }  // namespace
 
-void AddOptimizeMovesOption(CLI::App& command, int& iterations) {
+void AddOptimizeMovesOption(CLI::App& command, sim::PlanOptions& plan) {
   command
-      .add_option("--optimize-moves", iterations,
+      .add_option("--optimize-moves", plan.iterations,
                   "the expert plans each free move of a continuous task by this many iLQR "
                   "iterations through the twin's own dynamics and follows the plan (0: the "
                   "script's straight moves)")
       ->check(CLI::Range(0, 1000));
+  command
+      .add_option("--plan-stretch", plan.stretch,
+                  "with --optimize-moves: a planned move takes this many times the control steps "
+                  "it needs at the action limits")
+      ->capture_default_str()
+      ->check(CLI::Range(1.0, 10.0));
 }
 
 void AddSimCommands(CLI::App& parent, int& exit_code) {
@@ -68,15 +74,15 @@ void AddSimCommands(CLI::App& parent, int& exit_code) {
     const auto& o = *expert_options;
     auto task = std::make_shared<const sim::Task>(sim::LoadTaskSpec(o.task));
     const auto report = sim::EvaluateExpert(task, o.episodes, o.level, o.seed, o.noise, o.threads,
-                                            o.optimize_moves);
+                                            o.plan);
     core::Json out = {{"task", task->spec().name},
                       {"level", o.level},
                       {"episodes", report.episodes},
                       {"successes", report.successes},
                       {"success_rate", report.success_rate()},
                       {"mean_steps_to_success", report.mean_steps_to_success},
-                      {"planned_moves", report.planned_moves},
-                      {"failed_plans", report.failed_plans},
+                      {"planned_moves", report.plans.planned_moves},
+                      {"failed_plans", report.plans.failed_plans},
                       {"failed_episodes", report.failed_seeds}};
     std::cout << out.dump(2) << std::endl;
     exit_code = 0;
@@ -152,7 +158,7 @@ void AddSimCommands(CLI::App& parent, int& exit_code) {
     auto task = std::make_shared<const sim::Task>(sim::LoadTaskSpec(o.task));
     sim::Env env(task);
     sim::ScriptedExpert expert(*task, o.noise);
-    expert.set_planning(o.optimize_moves);
+    expert.set_planning(o.plan);
     core::Rng rng = sim::BeginExpertEpisode(env, expert, o.seed, o.episode, o.level);
     std::vector<float> state(env.state_dim());
     for (int t = 0; t < task->spec().horizon; ++t) {
@@ -223,7 +229,7 @@ void AddSimCommands(CLI::App& parent, int& exit_code) {
     sim::Env env(task);
     sim::RayCaster caster(sim::MakeCamera(spec), env.model());
     sim::ScriptedExpert expert(*task, o.noise);
-    expert.set_planning(o.optimize_moves);
+    expert.set_planning(o.plan);
     core::Rng rng = sim::BeginExpertEpisode(env, expert, o.seed, o.episode, o.level);
     core::Image frame{spec.width, spec.height, 3, 8,
                       std::vector<uint8_t>(std::size_t(spec.width) * spec.height * 3)};

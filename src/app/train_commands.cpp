@@ -326,7 +326,7 @@ void AddImitate(CLI::App& train, int& exit_code) {
                 "noise on the expert's actions (its labels stay clean): Gaussian, in units of the "
                 "per-step limits (discrete: the chance of a random move)")
       ->check(CLI::Range(0.0, 10.0));
-  AddOptimizeMovesOption(*c, o.optimize_moves);
+  AddOptimizeMovesOption(*c, o.plan);
   c->add_option("--level", o.level, "randomization level 0..3")->check(CLI::Range(0, 3));
   c->add_option("--eval-episodes", o.eval_episodes,
                 "episodes evaluating the learner after each round (0: none, keep the last)")
@@ -336,7 +336,8 @@ void AddImitate(CLI::App& train, int& exit_code) {
       ->check(CLI::PositiveNumber);
   c->callback([cli, &exit_code] {
     auto task = LoadTrainTask(cli->task, cli->twin, cli->controller);
-    core::Progress progress("imitate", cli->options.rounds, "rounds");
+    core::Progress progress("imitate", int64_t(cli->options.rounds) * cli->options.episodes,
+                            "expert episodes");
     const learn::ImitationReport r = learn::TrainImitation(task, cli->out, cli->options, &progress);
     progress.Finish();
     nlohmann::json rounds = nlohmann::json::array();
@@ -344,8 +345,8 @@ void AddImitate(CLI::App& train, int& exit_code) {
       rounds.push_back({{"round", row.round},
                         {"episodes", row.episodes},
                         {"successes", row.successes},
-                        {"planned_moves", row.planned_moves},
-                        {"failed_plans", row.failed_plans},
+                        {"planned_moves", row.plans.planned_moves},
+                        {"failed_plans", row.plans.failed_plans},
                         {"steps", row.steps},
                         {"loss", row.loss},
                         {"learner_success", row.learner}});

@@ -1,8 +1,8 @@
 #include "learn/imitate.h"
 
 #include <algorithm>
-#include <array>
 #include <fstream>
+#include <mutex>
 
 #include "core/error.h"
 #include "core/log.h"
@@ -28,20 +28,22 @@ struct Labelled {
 // Episodes 0 .. count - 1 of a round seeded `seed`: the expert (patient) acts with its action
 // perturbed by `noise` (sim::PerturbAction), and each state is labelled with the action it chose
 // there. Episode i starts as `sim expert`'s episode i of that seed; the steps are appended in
-// episode order, whatever the thread count. Fills the round's successes and plans.
+// episode order, whatever the thread count. Fills the round's successes and plans, and advances
+// `progress` (if any) an episode at a time.
 void Gather(std::shared_ptr<const sim::Task> task, const ImitationOptions& options, uint64_t seed,
-            int64_t count, Labelled& data, ImitationRound& row) {
+            int64_t count, Labelled& data, ImitationRound& row, core::Progress* progress) {
   const double noise = options.noise;
   const bool discrete = task->spec().control.action == sim::ActionMode::kDiscrete;
   std::vector<Labelled> per_episode(count);
   std::vector<char> success(count, 0);
   core::ThreadPool pool(options.threads);
-  std::vector<std::array<int, 2>> plans(pool.size(), {0, 0});
+  std::vector<sim::PlanCounts> plans(pool.size());
+  std::mutex progress_mutex;
   pool.ParallelRanges(count, [&](int block, int64_t begin, int64_t end) {
     sim::Env env(task, block);
     sim::ScriptedExpert expert(*task);
     expert.set_patient(true);
-    expert.set_planning(options.optimize_moves);
+    expert.set_planning(options.plan);
     const int state_dim = env.state_dim();
     for (int64_t j = begin; j < end; ++j) {
       core::Rng rng = sim::BeginExpertEpisode(env, expert, seed, j, options.level);
@@ -65,13 +67,14 @@ void Gather(std::shared_ptr<const sim::Task> task, const ImitationOptions& optio
         }
         if (r.done) break;
       }
+      if (progress) {
+        const std::lock_guard<std::mutex> lock(progress_mutex);
+        progress->Advance();
+      }
     }
-    plans[block] = {expert.planned_moves(), expert.failed_plans()};
+    plans[block] = expert.plans();
   });
-  for (const auto& p : plans) {
-    row.planned_moves += p[0];
-    row.failed_plans += p[1];
-  }
+  for (const sim::PlanCounts& p : plans) row.plans += p;
   int successes = 0;
   for (int64_t j = 0; j < count; ++j) {
     data.state_dim = per_episode[j].state_dim;
@@ -171,7 +174,7 @@ ImitationReport TrainImitation(std::shared_ptr<const sim::Task> task,
     row.round = round;
     row.episodes = options.episodes;
     const uint64_t seed = core::MixSeed(options.seed, uint64_t(round));
-    Gather(task, options, seed, row.episodes, data, row);
+    Gather(task, options, seed, row.episodes, data, row, progress);
     if (round == 0) FitNormalization(net, data, options.std_floor);
     row.steps = long(data.size());
     row.loss = Train(net, adam, data, options.train_steps, options.batch, rng);
@@ -191,8 +194,7 @@ ImitationReport TrainImitation(std::shared_ptr<const sim::Task> task,
         round, row.successes, row.episodes, row.steps, row.loss, 100 * row.learner);
     report.rounds.push_back(row);
     if (progress)
-      progress->Set(round + 1,
-                    "learner " + std::to_string(int(std::lround(100 * row.learner))) + "%");
+      progress->Advance(0, "learner " + std::to_string(int(std::lround(100 * row.learner))) + "%");
   }
   report.seconds = core::SecondsSince(start);
   return report;

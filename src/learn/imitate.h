@@ -30,6 +30,7 @@
 #include "core/progress.h"
 #include "sim/action.h"
 #include "sim/env.h"
+#include "sim/expert.h"
 #include "sim/task.h"
 
 namespace twinforge::learn {
@@ -41,10 +42,10 @@ struct ImitationOptions {
   // Noise on the actions taken (the labels stay clean): continuous, Gaussian with this standard
   // deviation in units of the per-step limits; discrete, the probability of a random move.
   double noise = 0.02;
-  // > 0: the expert plans each free move by this many iLQR iterations through the twin's own
-  // dynamics and follows the plan (sim::ScriptedExpert::set_planning): the actor then imitates
-  // trajectories optimized in the twin, SAM-RL's route. 0: the script's straight moves.
-  int optimize_moves = 0;
+  // iterations > 0: the expert plans each free move by this many iLQR iterations through the
+  // twin's own dynamics and follows the plan (sim::ScriptedExpert::set_planning): the actor then
+  // imitates trajectories optimized in the twin, SAM-RL's route. 0: the script's straight moves.
+  sim::PlanOptions plan;
   int batch = 256;
   int hidden = 256;
   double learning_rate = 1e-3;
@@ -63,7 +64,8 @@ struct ImitationOptions {
     a("episodes", episodes);
     a("train_steps", train_steps);
     a("noise", noise);
-    a("optimize_moves", optimize_moves);
+    a("optimize_moves", plan.iterations);
+    a("plan_stretch", plan.stretch);
     a("batch", batch);
     a("hidden", hidden);
     a("learning_rate", learning_rate);
@@ -77,7 +79,8 @@ struct ImitationOptions {
     a.Require(train_steps > 0 && batch > 0 && hidden > 0 && threads > 0, "train_steps",
               "positive step, batch, layer and thread counts");
     a.Require(noise >= 0, "noise", "non-negative noise");
-    a.Require(optimize_moves >= 0, "optimize_moves", "a non-negative iteration count");
+    a.Require(plan.iterations >= 0, "optimize_moves", "a non-negative iteration count");
+    a.Require(plan.stretch >= 1, "plan_stretch", "a stretch of at least 1");
     a.Require(learning_rate > 0 && std_floor > 0, "learning_rate", "positive rate and floor");
     a.Require(level >= 0 && level <= 3, "level", "a randomization level 0..3");
     a.Require(eval_episodes >= 0, "eval_episodes", "a non-negative count");
@@ -88,7 +91,7 @@ struct ImitationRound {
   int round = 0;
   int episodes = 0;                         // run this round
   int successes = 0;                        // of them, by the noisy expert
-  int planned_moves = 0, failed_plans = 0;  // optimize_moves: the round's plans, failed ones
+  sim::PlanCounts plans;                    // plan.iterations > 0: the round's plans
   long steps = 0;                           // labelled steps gathered so far (all rounds)
   double loss = 0;                          // mean training loss over the round's last 100 steps
   double learner = -1;  // the learner's success in the twin afterwards (-1: not evaluated)
@@ -104,6 +107,7 @@ struct ImitationReport {
 
 // Teaches a state policy for `task` on its scripted expert's noisy episodes and writes the best one
 // (by success in the twin; the last when eval_episodes is 0) to `out`, the curve beside it.
+// `progress` counts the expert's episodes (rounds x episodes).
 ImitationReport TrainImitation(std::shared_ptr<const sim::Task> task,
                                const std::filesystem::path& out, const ImitationOptions& options,
                                core::Progress* progress = nullptr);

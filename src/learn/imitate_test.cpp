@@ -6,6 +6,7 @@
 
 #include "core/config.h"
 #include "core/error.h"
+#include "core/progress.h"
 #include "core/test_support.h"
 #include "learn/evaluate.h"
 #include "learn/policy_net.h"
@@ -60,9 +61,9 @@ TEST(Imitation, TheNoisyExpertsEpisodesTeachThePeg) {
   EXPECT_EQ(lines, 3) << "a header and a row per round";
 }
 
-// optimize_moves: the expert plans its free moves by iLQR through the twin (four a peg episode,
+// plan.iterations: the expert plans its free moves by iLQR through the twin (four a peg episode,
 // none failing) and its episodes are the steadier, longer ones of the plans; the same episodes,
-// labelled, whatever the thread count.
+// labelled, whatever the thread count. The progress counts the expert's episodes as they end.
 TEST(Imitation, TheOptimizedExpertsEpisodesAreGathered) {
   PinMathThreads(1);
   auto task = std::make_shared<const sim::Task>(sim::LoadTaskSpec("peg_insertion"));
@@ -73,21 +74,27 @@ TEST(Imitation, TheOptimizedExpertsEpisodesAreGathered) {
   o.train_steps = 1;
   o.eval_episodes = 0;
   const ImitationReport scripted = TrainImitation(task, dir / "scripted.pt", o);
-  o.optimize_moves = 3;
-  const ImitationReport planned = TrainImitation(task, dir / "planned.pt", o);
+  o.plan.iterations = 3;
+  core::Progress progress("imitate", 2, "expert episodes");
+  progress.set_interactive(false);
+  const ImitationReport planned = TrainImitation(task, dir / "planned.pt", o, &progress);
+  EXPECT_EQ(progress.done(), 2);
   o.threads = 1;
   const ImitationReport one_thread = TrainImitation(task, dir / "one_thread.pt", o);
   ASSERT_EQ(planned.rounds.size(), 1u);
   const ImitationRound& r = planned.rounds[0];
-  EXPECT_EQ(scripted.rounds[0].planned_moves, 0);
-  EXPECT_EQ(r.planned_moves, 8);
-  EXPECT_EQ(r.failed_plans, 0);
+  EXPECT_EQ(scripted.rounds[0].plans.planned_moves, 0);
+  EXPECT_EQ(r.plans.planned_moves, 8);
+  EXPECT_EQ(r.plans.failed_plans, 0);
   EXPECT_EQ(r.successes, 2);
   EXPECT_GT(r.steps, scripted.rounds[0].steps) << "the planned moves are slower";
   EXPECT_EQ(one_thread.rounds[0].steps, r.steps);
   EXPECT_EQ(one_thread.rounds[0].loss, r.loss);
   ImitationOptions bad = o;
-  bad.optimize_moves = -1;
+  bad.plan.iterations = -1;
+  EXPECT_THROW(core::Validate(bad, "imitation options"), core::ConfigError);
+  bad = o;
+  bad.plan.stretch = 0.5;
   EXPECT_THROW(core::Validate(bad, "imitation options"), core::ConfigError);
 }
 

@@ -341,13 +341,7 @@ double Env::FingerOpening() const {
   return 0.5 * (data_->qpos[r.finger_qpos[0]] + data_->qpos[r.finger_qpos[1]]);
 }
 
-core::Pose Env::SitePose(int site) const {
-  core::Pose world;
-  world.translation = Eigen::Vector3d(data_->site_xpos + 3 * site);
-  world.rotation = core::Quat(Eigen::Matrix3d(
-      Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(data_->site_xmat + 9 * site)));
-  return base_.Inverse() * world;
-}
+core::Pose Env::SitePose(int site) const { return base_.Inverse() * SiteWorldPose(data_.get(), site); }
 
 core::Pose Env::BodyPose(int body) const {
   const core::Pose world{Eigen::Vector3d(data_->xpos + 3 * body),

@@ -98,6 +98,13 @@ ScriptedExpert::ScriptedExpert(const Task& task, double noise) : task_(task), no
 
 void ScriptedExpert::Reset() { BeginStep(0); }
 
+void ScriptedExpert::set_planning(const PlanOptions& plan) {
+  if (plan.iterations < 0 || !(plan.stretch >= 1))
+    throw core::Error("expert planning: expected iterations >= 0 and a stretch >= 1, got " +
+                      std::to_string(plan.iterations) + " and " + std::to_string(plan.stretch));
+  planning_ = plan;
+}
+
 void ScriptedExpert::Restart(int step) {
   if (step < 0 || step >= static_cast<int>(task_.spec().expert.steps.size()))
     throw core::Error(task_.spec().name + ": the expert has no step " + std::to_string(step));
@@ -116,7 +123,7 @@ void ScriptedExpert::BeginStep(int step) {
 }
 
 bool ScriptedExpert::Plans(const ExpertStep& step) const {
-  return plan_iterations_ > 0 && task_.spec().control.action == ActionMode::kContinuous &&
+  return planning_.iterations > 0 && task_.spec().control.action == ActionMode::kContinuous &&
          step.type == ExpertStepType::kMove && step.speed <= 0 && step.search <= 0;
 }
 
@@ -130,7 +137,7 @@ std::vector<core::Pose> ScriptedExpert::PlanMove(const Env& env, const ExpertSte
   const double needed =
       std::max((target.translation - ee.translation).norm() / control.limits.translation,
                core::AngleBetween(target.rotation, ee.rotation) / control.limits.rotation);
-  const int steps = std::clamp(int(std::ceil(1.5 * needed)) + 1, 2, std::max(2, step.max_steps));
+  const int steps = std::clamp(int(std::ceil(planning_.stretch * needed)) + 1, 2, std::max(2, step.max_steps));
   const core::Pose goal = env.base() * target;
   // Holding something, the plan moves what it holds: the carried site to where the target puts
   // it, through the grasp's own contacts.
@@ -149,9 +156,9 @@ std::vector<core::Pose> ScriptedExpert::PlanMove(const Env& env, const ExpertSte
   const double turn = control.limits.translation / control.limits.rotation;
   cost.Turn(tool, goal.rotation, turn * turn);
   IlqrOptions options;
-  options.iterations = plan_iterations_;
+  options.iterations = planning_.iterations;
   options.linearize_every = control.substeps;  // the targets change once a control period
-  ++planned_moves_;
+  ++plans_.planned_moves;
   const int horizon = steps * control.substeps;
   // Started from the arm's joint targets eased (minimum jerk) to the target's inverse kinematics.
   const RobotIndex& robot = task_.index().robot;
@@ -171,7 +178,7 @@ std::vector<core::Pose> ScriptedExpert::PlanMove(const Env& env, const ExpertSte
   try {
     result = OptimizeTrajectory(m, env.data(), cost, horizon, std::move(initial), options);
   } catch (const core::NumericError& e) {
-    ++failed_plans_;
+    ++plans_.failed_plans;
     spdlog::debug("expert: step {} not planned ({}); moving as scripted", step_, e.what());
     return {};
   }
@@ -185,10 +192,7 @@ std::vector<core::Pose> ScriptedExpert::PlanMove(const Env& env, const ExpertSte
     mj_step(m, d.get());
     if ((t + 1) % control.substeps == 0) {
       mj_kinematics(m, d.get());
-      double quat[4];
-      mju_mat2Quat(quat, d->site_xmat + 9 * tool);
-      plan.push_back(to_base *
-                     core::Pose{Eigen::Vector3d(d->site_xpos + 3 * tool), core::QuatFromMj(quat)});
+      plan.push_back(to_base * SiteWorldPose(d.get(), tool));
     }
   }
   spdlog::debug(
@@ -428,17 +432,17 @@ core::Rng BeginExpertEpisode(Env& env, ScriptedExpert& expert, uint64_t seed, in
 }
 
 ExpertReport EvaluateExpert(std::shared_ptr<const Task> task, int episodes, int level,
-                            uint64_t seed, double noise, int threads, int plan_iterations) {
+                            uint64_t seed, double noise, int threads, const PlanOptions& plan) {
   ExpertReport report;
   report.episodes = episodes;
   std::vector<int> steps_to_success(episodes, -1);
   core::ThreadPool pool(threads);
-  std::vector<std::array<int, 2>> plans(pool.size(), {0, 0});
+  std::vector<PlanCounts> plans(pool.size());
   // Each range builds one env; each episode depends only on its seed.
   pool.ParallelRanges(episodes, [&](int block, int64_t begin, int64_t end) {
     Env env(task, block);
     ScriptedExpert expert(*task, noise);
-    expert.set_planning(plan_iterations);
+    expert.set_planning(plan);
     for (int64_t i = begin; i < end; ++i) {
       core::Rng rng = BeginExpertEpisode(env, expert, seed, i, level);
       for (int t = 0; t < task->spec().horizon; ++t) {
@@ -450,12 +454,9 @@ ExpertReport EvaluateExpert(std::shared_ptr<const Task> task, int episodes, int 
         if (r.done) break;
       }
     }
-    plans[block] = {expert.planned_moves(), expert.failed_plans()};
+    plans[block] = expert.plans();
   });
-  for (const auto& p : plans) {
-    report.planned_moves += p[0];
-    report.failed_plans += p[1];
-  }
+  for (const PlanCounts& p : plans) report.plans += p;
   double total = 0;
   for (int i = 0; i < episodes; ++i) {
     if (steps_to_success[i] > 0) {

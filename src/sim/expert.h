@@ -10,6 +10,22 @@
 
 namespace twinforge::sim {
 
+// How an expert plans its free moves (ScriptedExpert::set_planning).
+struct PlanOptions {
+  int iterations = 0;    // iLQR iterations a move; 0: every move as scripted
+  double stretch = 1.5;  // the plan's length over the control steps the move needs (>= 1)
+};
+
+// Free moves an expert planned by trajectory optimization, and of them the plans that failed.
+struct PlanCounts {
+  int planned_moves = 0, failed_plans = 0;
+  PlanCounts& operator+=(const PlanCounts& other) {
+    planned_moves += other.planned_moves;
+    failed_plans += other.failed_plans;
+    return *this;
+  }
+};
+
 class ScriptedExpert {
  public:
   // `noise`: probability of a random move (discrete) or relative std-dev of Gaussian noise on
@@ -27,13 +43,13 @@ class ScriptedExpert {
   // search) by trajectory optimization through the env's own model, SAM-RL's optimized teacher:
   // `iterations` of iLQR on MuJoCo's finite-differenced derivatives (sim/trajectory_optimizer.h)
   // bring the moved site (the carried one, or the tool) to the step's target and turn the tool to
-  // its orientation, with the least joint motion over 1.5 times the control steps the move needs
-  // at the action limits. The expert then aims at the plan's tool pose of each control step in
-  // turn, and finishes the move as scripted. 0 (the default): every move as scripted.
-  void set_planning(int iterations) { plan_iterations_ = iterations; }
+  // its orientation, with the least joint motion over `stretch` times the control steps the move
+  // needs at the action limits. The expert then aims at the plan's tool pose of each control step
+  // in turn, and finishes the move as scripted. 0 iterations (the default): every move as
+  // scripted. Throws core::Error for negative iterations or a stretch under 1.
+  void set_planning(const PlanOptions& plan);
   // Moves planned so far, and of them those whose optimization failed (moved as scripted).
-  int planned_moves() const { return planned_moves_; }
-  int failed_plans() const { return failed_plans_; }
+  const PlanCounts& plans() const { return plans_; }
   // Goes back to the start of step `step` (a step done again: the scene changed under it).
   // Throws core::Error for a step the script does not have.
   void Restart(int step);
@@ -78,8 +94,8 @@ class ScriptedExpert {
   double last_height_ = 0;
   int stalled_ = 0;
   int spiral_ = 0;
-  int plan_iterations_ = 0;
-  int planned_moves_ = 0, failed_plans_ = 0;
+  PlanOptions planning_;
+  PlanCounts plans_;
   std::vector<core::Pose> plan_;  // the current move's planned tool poses
 };
 
@@ -102,7 +118,7 @@ struct ExpertReport {
   double success_rate() const { return episodes ? double(successes) / episodes : 0.0; }
   double mean_steps_to_success = 0;         // over successful episodes
   std::vector<int> failed_seeds;            // episode seeds that failed, to replay them
-  int planned_moves = 0, failed_plans = 0;  // with planning (ScriptedExpert::set_planning)
+  PlanCounts plans;                         // with planning (ScriptedExpert::set_planning)
 };
 
 // Starts episode `episode` of a run seeded `seed` at `level`: resets env and expert and returns
@@ -114,8 +130,8 @@ core::Rng BeginExpertEpisode(Env& env, ScriptedExpert& expert, uint64_t seed, in
 // Runs the expert for `episodes` episodes at `level` (episode i begun by BeginExpertEpisode),
 // spread over `threads` threads with one env per thread. An episode succeeds when the success
 // predicates hold at any step; it ends there.
-// `plan_iterations` > 0: the expert plans its free moves (ScriptedExpert::set_planning).
+// `plan`: how the expert plans its free moves (ScriptedExpert::set_planning).
 ExpertReport EvaluateExpert(std::shared_ptr<const Task> task, int episodes, int level,
-                            uint64_t seed, double noise, int threads, int plan_iterations = 0);
+                            uint64_t seed, double noise, int threads, const PlanOptions& plan = {});
 
 }  // namespace twinforge::sim

@@ -28,15 +28,16 @@ INSTANTIATE_TEST_SUITE_P(Tasks, ExpertBar,
 // least joint motion over 1.5 times the steps the move needs): its first move is slower and
 // steadier than the script's straight one, which starts at the full step; every planned action
 // stays under the step. Every free move of the peg (above it, down to it, the lift, over the
-// hole) is planned, none fails, and both episodes end with the peg in the hole.
+// hole) is planned, none fails, and both episodes end with the peg in the hole. Stretched less
+// (1.1), the first move takes fewer steps; a stretch under 1 is refused.
 TEST(ScriptedExpert, PlannedMovesAreSteadierAndFinishThePeg) {
   auto task = std::make_shared<const Task>(LoadTaskSpec("peg_insertion"));
   const double limit = task->spec().control.limits.translation;
   for (int64_t episode = 0; episode < 2; ++episode) {
     // The translation of each action during the first move, and whether the episode succeeded.
-    const auto run = [&](int iterations, ScriptedExpert& expert) {
+    const auto run = [&](PlanOptions plan, ScriptedExpert& expert) {
       Env env(task);
-      expert.set_planning(iterations);
+      expert.set_planning(plan);
       core::Rng rng = BeginExpertEpisode(env, expert, 2024, episode, 1);
       std::vector<double> first_move;
       for (int t = 0; t < task->spec().horizon; ++t) {
@@ -49,19 +50,24 @@ TEST(ScriptedExpert, PlannedMovesAreSteadierAndFinishThePeg) {
       }
       return std::make_pair(first_move, false);
     };
-    ScriptedExpert scripted(*task), planned(*task);
-    const auto [straight, straight_success] = run(0, scripted);
-    const auto [steady, planned_success] = run(3, planned);
-    EXPECT_TRUE(straight_success && planned_success) << "episode " << episode;
+    ScriptedExpert scripted(*task), planned(*task), brisk(*task);
+    const auto [straight, straight_success] = run({0}, scripted);
+    const auto [steady, planned_success] = run({3}, planned);
+    const auto [quicker, brisk_success] = run({3, 1.1}, brisk);
+    EXPECT_TRUE(straight_success && planned_success && brisk_success) << "episode " << episode;
+    EXPECT_LT(quicker.size(), steady.size()) << "episode " << episode;
     ASSERT_GE(straight.size(), 3u);
     ASSERT_GE(steady.size(), 3u);
     EXPECT_GE(straight.front(), limit) << "the script's first move starts at full speed";
     EXPECT_LT(*std::max_element(steady.begin(), steady.end()), limit) << "episode " << episode;
     EXPECT_GT(steady.size(), straight.size()) << "episode " << episode;
-    EXPECT_EQ(scripted.planned_moves(), 0);
-    EXPECT_EQ(planned.planned_moves(), 4) << "episode " << episode;
-    EXPECT_EQ(planned.failed_plans(), 0);
+    EXPECT_EQ(scripted.plans().planned_moves, 0);
+    EXPECT_EQ(planned.plans().planned_moves, 4) << "episode " << episode;
+    EXPECT_EQ(planned.plans().failed_plans, 0);
   }
+  ScriptedExpert expert(*task);
+  EXPECT_THROW(expert.set_planning({3, 0.9}), core::Error);
+  EXPECT_THROW(expert.set_planning({-1}), core::Error);
 }
 
 // At the limit of the 3 cm grid, turns and moves combined still close a sideways error of a

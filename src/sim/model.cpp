@@ -51,6 +51,15 @@ int FreeJointOf(const mjModel* m, int body) {
   return -1;
 }
 
+core::Pose SiteWorldPose(const mjData* d, int site) {
+  core::Pose pose;
+  pose.translation = Eigen::Vector3d(d->site_xpos + 3 * site);
+  double quat[4];
+  mju_mat2Quat(quat, d->site_xmat + 9 * site);
+  pose.rotation = core::QuatFromMj(quat);
+  return pose;
+}
+
 std::string MujocoVersion() {
   const int v = mj_version();  // e.g. 222
   return std::to_string(v / 100) + "." + std::to_string(v / 10 % 10) + "." + std::to_string(v % 10);

@@ -7,6 +7,8 @@
 #include <memory>
 #include <string>
 
+#include "core/se3.h"
+
 namespace twinforge::sim {
 
 struct ModelDeleter {
@@ -32,6 +34,9 @@ bool InSubtree(const mjModel* m, int body, int root);
 
 // The body's free joint (an object), or -1.
 int FreeJointOf(const mjModel* m, int body);
+
+// Site `site`'s pose in the world frame, as `d`'s last kinematics left it.
+core::Pose SiteWorldPose(const mjData* d, int site);
 
 // "2.2.2"
 std::string MujocoVersion();

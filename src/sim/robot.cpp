@@ -70,13 +70,7 @@ void Kinematics::SetArm(const ArmVector& q) const {
 
 core::Pose Kinematics::EePose(const ArmVector& q) const {
   SetArm(q);
-  const int s = index_.ee_site;
-  core::Pose pose;
-  pose.translation = Eigen::Map<const Eigen::Vector3d>(data_->site_xpos + 3 * s);
-  Eigen::Matrix3d r =
-      Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(data_->site_xmat + 9 * s);
-  pose.rotation = core::Quat(r).normalized();
-  return pose;
+  return SiteWorldPose(data_.get(), index_.ee_site);
 }
 
 Eigen::Matrix<double, 6, kArmDof> Kinematics::Jacobian(const ArmVector& q) const {
