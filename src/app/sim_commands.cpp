@@ -73,8 +73,8 @@ void AddSimCommands(CLI::App& parent, int& exit_code) {
   expert->callback([expert_options, &exit_code] {
     const auto& o = *expert_options;
     auto task = std::make_shared<const sim::Task>(sim::LoadTaskSpec(o.task));
-    const auto report = sim::EvaluateExpert(task, o.episodes, o.level, o.seed, o.noise, o.threads,
-                                            o.plan);
+    const auto report =
+        sim::EvaluateExpert(task, o.episodes, o.level, o.seed, o.noise, o.threads, o.plan);
     core::Json out = {{"task", task->spec().name},
                       {"level", o.level},
                       {"episodes", report.episodes},

@@ -89,13 +89,13 @@ struct ImitationOptions {
 
 struct ImitationRound {
   int round = 0;
-  int episodes = 0;                         // run this round
-  int successes = 0;                        // of them, by the noisy expert
-  sim::PlanCounts plans;                    // plan.iterations > 0: the round's plans
-  long steps = 0;                           // labelled steps gathered so far (all rounds)
-  double loss = 0;                          // mean training loss over the round's last 100 steps
-  double learner = -1;  // the learner's success in the twin afterwards (-1: not evaluated)
-  double seconds = 0;   // since the start
+  int episodes = 0;       // run this round
+  int successes = 0;      // of them, by the noisy expert
+  sim::PlanCounts plans;  // plan.iterations > 0: the round's plans
+  long steps = 0;         // labelled steps gathered so far (all rounds)
+  double loss = 0;        // mean training loss over the round's last 100 steps
+  double learner = -1;    // the learner's success in the twin afterwards (-1: not evaluated)
+  double seconds = 0;     // since the start
 };
 
 struct ImitationReport {

@@ -341,7 +341,9 @@ double Env::FingerOpening() const {
   return 0.5 * (data_->qpos[r.finger_qpos[0]] + data_->qpos[r.finger_qpos[1]]);
 }
 
-core::Pose Env::SitePose(int site) const { return base_.Inverse() * SiteWorldPose(data_.get(), site); }
+core::Pose Env::SitePose(int site) const {
+  return base_.Inverse() * SiteWorldPose(data_.get(), site);
+}
 
 core::Pose Env::BodyPose(int body) const {
   const core::Pose world{Eigen::Vector3d(data_->xpos + 3 * body),

@@ -137,7 +137,8 @@ std::vector<core::Pose> ScriptedExpert::PlanMove(const Env& env, const ExpertSte
   const double needed =
       std::max((target.translation - ee.translation).norm() / control.limits.translation,
                core::AngleBetween(target.rotation, ee.rotation) / control.limits.rotation);
-  const int steps = std::clamp(int(std::ceil(planning_.stretch * needed)) + 1, 2, std::max(2, step.max_steps));
+  const int steps =
+      std::clamp(int(std::ceil(planning_.stretch * needed)) + 1, 2, std::max(2, step.max_steps));
   const core::Pose goal = env.base() * target;
   // Holding something, the plan moves what it holds: the carried site to where the target puts
   // it, through the grasp's own contacts.

@@ -116,9 +116,9 @@ struct ExpertReport {
   int episodes = 0;
   int successes = 0;
   double success_rate() const { return episodes ? double(successes) / episodes : 0.0; }
-  double mean_steps_to_success = 0;         // over successful episodes
-  std::vector<int> failed_seeds;            // episode seeds that failed, to replay them
-  PlanCounts plans;                         // with planning (ScriptedExpert::set_planning)
+  double mean_steps_to_success = 0;  // over successful episodes
+  std::vector<int> failed_seeds;     // episode seeds that failed, to replay them
+  PlanCounts plans;                  // with planning (ScriptedExpert::set_planning)
 };
 
 // Starts episode `episode` of a run seeded `seed` at `level`: resets env and expert and returns
