@@ -57,6 +57,15 @@ void AddOptimizeMovesOption(CLI::App& command, sim::PlanOptions& plan) {
                   "it needs at the action limits")
       ->capture_default_str()
       ->check(CLI::Range(1.0, 10.0));
+  command.add_flag("--plan-along-path", plan.along_path,
+                   "with --optimize-moves: aim at the plan's pose one step past the one nearest "
+                   "the tool, not at the pose for the control step the move is in");
+  command
+      .add_option("--plan-end-speed", plan.end_speed_weight,
+                  "with --optimize-moves: the weight on the arm's joint speeds at a plan's end "
+                  "(1 stops there, 0 arrives moving)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1e6));
 }
 
 void AddSimCommands(CLI::App& parent, int& exit_code) {

@@ -66,6 +66,8 @@ struct ImitationOptions {
     a("noise", noise);
     a("optimize_moves", plan.iterations);
     a("plan_stretch", plan.stretch);
+    a("plan_along_path", plan.along_path);
+    a("plan_end_speed_weight", plan.end_speed_weight);
     a("batch", batch);
     a("hidden", hidden);
     a("learning_rate", learning_rate);
@@ -81,6 +83,7 @@ struct ImitationOptions {
     a.Require(noise >= 0, "noise", "non-negative noise");
     a.Require(plan.iterations >= 0, "optimize_moves", "a non-negative iteration count");
     a.Require(plan.stretch >= 1, "plan_stretch", "a stretch of at least 1");
+    a.Require(plan.end_speed_weight >= 0, "plan_end_speed_weight", "a non-negative weight");
     a.Require(learning_rate > 0 && std_floor > 0, "learning_rate", "positive rate and floor");
     a.Require(level >= 0 && level <= 3, "level", "a randomization level 0..3");
     a.Require(eval_episodes >= 0, "eval_episodes", "a non-negative count");

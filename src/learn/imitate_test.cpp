@@ -96,6 +96,9 @@ TEST(Imitation, TheOptimizedExpertsEpisodesAreGathered) {
   bad = o;
   bad.plan.stretch = 0.5;
   EXPECT_THROW(core::Validate(bad, "imitation options"), core::ConfigError);
+  bad = o;
+  bad.plan.end_speed_weight = -1;
+  EXPECT_THROW(core::Validate(bad, "imitation options"), core::ConfigError);
 }
 
 TEST(Imitation, RefusesATaskWithoutAnExpertAndAPointCloudPolicy) {

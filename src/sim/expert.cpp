@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <vector>
 
@@ -15,6 +16,10 @@
 namespace twinforge::sim {
 
 namespace {
+
+// Metres a radian of the tool's turn counts as: a step's turn weighs as much as a step's move, as
+// the script counts them.
+double TurnWeight(const ActionLimits& limits) { return limits.translation / limits.rotation; }
 
 // Tool orientation with z along `approach` and y along `fingers` (made orthogonal to it).
 core::Quat ToolOrientation(const Eigen::Vector3d& approach, const Eigen::Vector3d& fingers) {
@@ -99,9 +104,12 @@ ScriptedExpert::ScriptedExpert(const Task& task, double noise) : task_(task), no
 void ScriptedExpert::Reset() { BeginStep(0); }
 
 void ScriptedExpert::set_planning(const PlanOptions& plan) {
-  if (plan.iterations < 0 || !(plan.stretch >= 1))
-    throw core::Error("expert planning: expected iterations >= 0 and a stretch >= 1, got " +
-                      std::to_string(plan.iterations) + " and " + std::to_string(plan.stretch));
+  if (plan.iterations < 0 || !(plan.stretch >= 1) || !(plan.end_speed_weight >= 0))
+    throw core::Error(
+        "expert planning: expected iterations >= 0, a stretch >= 1 and an end speed weight >= 0, "
+        "got " +
+        std::to_string(plan.iterations) + ", " + std::to_string(plan.stretch) + " and " +
+        std::to_string(plan.end_speed_weight));
   planning_ = plan;
 }
 
@@ -149,12 +157,11 @@ std::vector<core::Pose> ScriptedExpert::PlanMove(const Env& env, const ExpertSte
   SiteReachCost cost(carry >= 0 ? carry : tool, site_goal);
   cost.running = 0;
   cost.terminal = 1e4;
-  cost.velocity = 1;
+  cost.velocity = planning_.end_speed_weight;
   cost.motion = 1e-2;
   cost.control = 1e-6;
   cost.control_ref = Eigen::Map<const Eigen::VectorXd>(env.data()->ctrl, m->nu);
-  // A step's turn weighs as much as a step's move, as the script counts them.
-  const double turn = control.limits.translation / control.limits.rotation;
+  const double turn = TurnWeight(control.limits);
   cost.Turn(tool, goal.rotation, turn * turn);
   IlqrOptions options;
   options.iterations = planning_.iterations;
@@ -187,7 +194,7 @@ std::vector<core::Pose> ScriptedExpert::PlanMove(const Env& env, const ExpertSte
   DataPtr d = MakeData(m);
   mj_copyData(d.get(), m, env.data());
   const core::Pose to_base = env.base().Inverse();
-  std::vector<core::Pose> plan;
+  std::vector<core::Pose> plan{ee};
   for (int t = 0; t < horizon; ++t) {
     std::copy_n(result.controls.data() + t * m->nu, m->nu, d->ctrl);
     mj_step(m, d.get());
@@ -203,6 +210,18 @@ std::vector<core::Pose> ScriptedExpert::PlanMove(const Env& env, const ExpertSte
       1e3 * (plan.back().translation - target.translation).norm(),
       core::AngleBetween(plan.back().rotation, target.rotation));
   return plan;
+}
+
+int ScriptedExpert::NearestPlanPose(const core::Pose& tool) const {
+  const double turn = TurnWeight(task_.spec().control.limits);
+  int nearest = 0;
+  double least = std::numeric_limits<double>::infinity();
+  for (int k = 0; k < int(plan_.size()); ++k) {
+    const double distance = (plan_[k].translation - tool.translation).norm() +
+                            turn * core::AngleBetween(plan_[k].rotation, tool.rotation);
+    if (distance < least) least = distance, nearest = k;
+  }
+  return nearest;
 }
 
 core::Pose ScriptedExpert::Target(const Env& env, const ExpertStep& step) {
@@ -370,7 +389,8 @@ Action ScriptedExpert::Act(const Env& env, core::Rng& rng) {
       core::Pose aim = target;
       if (Plans(step)) {
         if (steps_in_step_ == 0) plan_ = PlanMove(env, step, target);
-        if (steps_in_step_ < int(plan_.size())) aim = plan_[steps_in_step_];
+        const int next = planning_.along_path ? NearestPlanPose(ee) + 1 : steps_in_step_ + 1;
+        if (next < int(plan_.size())) aim = plan_[next];
       }
       if (spiral_ > 0 && stalled_ > 0)  // searching, still blocked: press gently
         aim.translation.z() = std::max(aim.translation.z(), ee.translation.z() - kSearchPress);

@@ -14,6 +14,13 @@ namespace twinforge::sim {
 struct PlanOptions {
   int iterations = 0;    // iLQR iterations a move; 0: every move as scripted
   double stretch = 1.5;  // the plan's length over the control steps the move needs (>= 1)
+  // How the expert follows a plan. By the clock (false): it aims at the plan's pose for the
+  // control step it is in. Along the path (true): at the plan's pose one step past the one
+  // nearest the tool, so where the tool is, not how long the move has taken, decides the aim.
+  bool along_path = false;
+  // The weight on the arm's joint speeds (squared, rad/s) at the plan's end: 1 brings it to a
+  // stop there; 0 lets it arrive moving, as the script's moves do.
+  double end_speed_weight = 1.0;
 };
 
 // Free moves an expert planned by trajectory optimization, and of them the plans that failed.
@@ -44,9 +51,10 @@ class ScriptedExpert {
   // `iterations` of iLQR on MuJoCo's finite-differenced derivatives (sim/trajectory_optimizer.h)
   // bring the moved site (the carried one, or the tool) to the step's target and turn the tool to
   // its orientation, with the least joint motion over `stretch` times the control steps the move
-  // needs at the action limits. The expert then aims at the plan's tool pose of each control step
-  // in turn, and finishes the move as scripted. 0 iterations (the default): every move as
-  // scripted. Throws core::Error for negative iterations or a stretch under 1.
+  // needs at the action limits. The expert then aims at the plan's tool poses in turn (by the
+  // clock or along the path: PlanOptions), and finishes the move as scripted. 0 iterations (the
+  // default): every move as scripted. Throws core::Error for negative iterations, a stretch
+  // under 1 or a negative end speed weight.
   void set_planning(const PlanOptions& plan);
   // Moves planned so far, and of them those whose optimization failed (moved as scripted).
   const PlanCounts& plans() const { return plans_; }
@@ -69,11 +77,13 @@ class ScriptedExpert {
   // at_grid_target_ when no move helps.
   Action Toward(const Env& env, const core::Pose& target, double closure);
   Action HoldStill(const Env& env) const;
-  // Whether set_planning applies to `step`; the planned tool poses of a move to `target`, one
-  // per control step (empty when the optimization failed).
+  // Whether set_planning applies to `step`; the tool pose where the move to `target` starts,
+  // then the planned tool poses, one per control step (empty when the optimization failed).
   bool Plans(const ExpertStep& step) const;
   std::vector<core::Pose> PlanMove(const Env& env, const ExpertStep& step,
                                    const core::Pose& target);
+  // The index of the pose in plan_ nearest `tool` (0 for an empty plan).
+  int NearestPlanPose(const core::Pose& tool) const;
   void Advance();
   void BeginStep(int step);  // the step's own state cleared
 
@@ -96,7 +106,9 @@ class ScriptedExpert {
   int spiral_ = 0;
   PlanOptions planning_;
   PlanCounts plans_;
-  std::vector<core::Pose> plan_;  // the current move's planned tool poses
+  // The current move's tool poses: where the tool was when the move was planned, then the
+  // plan's, one per control step.
+  std::vector<core::Pose> plan_;
 };
 
 // `action` with noise: a random move with probability `noise` (discrete), or Gaussian noise of

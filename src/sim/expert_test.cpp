@@ -70,6 +70,49 @@ TEST(ScriptedExpert, PlannedMovesAreSteadierAndFinishThePeg) {
   EXPECT_THROW(expert.set_planning({-1}), core::Error);
 }
 
+// Following a plan along its path (PlanOptions::along_path), the expert aims by where the tool
+// is: with the arm held still at the start of the first planned move, it asks for the same first
+// step again and again, where following the plan by the clock it asks for more each step, the
+// plan running on without the arm. Along the path, and arriving moving (end speed weight 0), the
+// expert still puts the peg in the hole. A negative end speed weight is refused.
+TEST(ScriptedExpert, AlongThePathThePlanIsFollowedFromWhereTheToolIs) {
+  auto task = std::make_shared<const Task>(LoadTaskSpec("peg_insertion"));
+  // The translations the expert asks for while the arm is held still for 4 steps.
+  const auto held = [&](PlanOptions plan) {
+    Env env(task);
+    ScriptedExpert expert(*task);
+    expert.set_planning(plan);
+    core::Rng rng = BeginExpertEpisode(env, expert, 2024, 0, 1);
+    std::vector<double> asked;
+    for (int t = 0; t < 4; ++t) {
+      Action action = expert.Act(env, rng);
+      asked.push_back(Eigen::Vector3d(action.value.data()).norm());
+      std::fill_n(action.value.begin(), 6, 0.0);
+      env.Step(action);
+    }
+    return asked;
+  };
+  // Planned over 3 times the steps the move needs, a step asks for about a third of the limit.
+  const std::vector<double> clock = held({3, 3.0}), path = held({3, 3.0, true});
+  EXPECT_GT(clock.back(), 2 * clock.front()) << "by the clock the aim runs ahead";
+  for (double step : path) EXPECT_NEAR(step, path.front(), 0.05 * path.front());
+  EXPECT_NEAR(path.front(), clock.front(), 1e-9) << "at the start both aim alike";
+
+  Env env(task);
+  ScriptedExpert expert(*task);
+  expert.set_planning({3, 1.0, true, 0.0});
+  core::Rng rng = BeginExpertEpisode(env, expert, 2024, 1, 1);
+  bool success = false;
+  for (int t = 0; t < task->spec().horizon && !success; ++t) {
+    const StepResult r = env.Step(expert.Act(env, rng));
+    success = r.success;
+    if (r.done) break;
+  }
+  EXPECT_TRUE(success);
+  EXPECT_EQ(expert.plans().failed_plans, 0);
+  EXPECT_THROW(expert.set_planning({3, 1.0, true, -1.0}), core::Error);
+}
+
 // At the limit of the 3 cm grid, turns and moves combined still close a sideways error of a
 // centimetre (the mug handle needs a few mm): applying the refining moves exactly, the tool
 // ends within 4 mm of a goal that no single move gets nearer to.
