@@ -27,7 +27,8 @@ struct BcCli {
 
 // The task to train on: `task` (a name or a task.yaml), or the twin's in `twin` (its task must
 // be `task`). With `controller`, a task.yaml `sysid` wrote, the arm follows its commands through
-// the controller identified there (control.servo, control.arm_scales), not the task's own.
+// the controller identified there (control.servo, control.arm_scales, control.grip_force), not
+// the task's own.
 std::shared_ptr<const sim::Task> LoadTrainTask(const std::string& task, const std::string& twin,
                                                const std::string& controller = "") {
   sim::TaskSpec spec;
@@ -50,6 +51,7 @@ std::shared_ptr<const sim::Task> LoadTrainTask(const std::string& task, const st
                               "an ideal servo: not a controller sysid identified");
     spec.control.servo = identified.control.servo;
     spec.control.arm_scales = identified.control.arm_scales;
+    spec.control.grip_force = identified.control.grip_force;
   }
   return std::make_shared<const sim::Task>(std::move(spec));
 }

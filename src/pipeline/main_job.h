@@ -57,10 +57,11 @@ struct MainJobOptions {
   double camera_frames_height = reality::kCameraFramesHeight;  // m above the camera's look-at point
   double camera_frames_spread = reality::kCameraFramesSpread;  // m
   real2sim::CalibrateOptions calibrate;
-  // Identify the twin's physics on the robot (free-arm moves and two task runs, about 2 min):
-  // the servo's latency and interpolation, the arm's gains and the moving parts' damping, dry
-  // friction and mass, each where the runs pin it down. Measured at stop 27 on the proxy drawer:
-  // the ideal servo alone cost the stop-26 student 20 / 10 / 13 points in its own twin.
+  // Identify the twin's physics on the robot (free moves and two task runs, about 3 min):
+  // the servo's latency and interpolation, the arm's gains, the grip force and the moving parts'
+  // damping, dry friction and mass, each where the runs pin it down. Measured at stop 27 on the
+  // proxy drawer: the ideal servo alone cost the stop-26 student 20 / 10 / 13 points in its own
+  // twin.
   bool sysid = true;
   real2sim::RobotSysidOptions sysid_options;
   int demos = 15;

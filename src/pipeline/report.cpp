@@ -196,6 +196,8 @@ std::filesystem::path WriteReport(const std::filesystem::path& root) {
       if (found["arm_scales"].contains(key))  // (sysid before stop 31 did not write the damping)
         row(std::string("arm ") + key + " scale", start["arm_scales"][key].get<double>(),
             found["arm_scales"][key].get<double>());
+    if (found.contains("grip_force"))  // (sysid before stop 56 did not fit it)
+      row("grip force (N)", start["grip_force"].get<double>(), found["grip_force"].get<double>());
     for (const auto& [name, value] : start["scene"].items())
       row(name, value.get<double>(), found["scene"][name].get<double>());
     h << "</table><p>A scene value the task runs do not pin down keeps the twin's.</p>\n";

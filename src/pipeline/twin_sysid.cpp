@@ -106,7 +106,8 @@ core::Json IdentifyTwin(reality::Robot& robot, const std::filesystem::path& twin
 
   // ... run on the robot.
   spdlog::info(
-      "sysid: recording on the robot: free-arm moves ({} steps), the task at full and half "
+      "sysid: recording on the robot: free moves of the arm and gripper ({} steps), the task at "
+      "full and half "
       "speed ({} and {} steps)",
       free_targets.size(), full_speed.size(), half_speed.size());
   std::vector<real2sim::RobotTrajectory> free_moves{Record(robot, "free_arm", free_targets)};
@@ -128,8 +129,8 @@ core::Json IdentifyTwin(reality::Robot& robot, const std::filesystem::path& twin
   const auto result =
       real2sim::IdentifyRobotPhysics(twin_task, scene, free_moves, task_runs, options, progress);
 
-  // The refined twin: a copy with the arm's controller in task.yaml, the scene's values in
-  // twin.yaml and scene.xml re-exported.
+  // The refined twin: a copy with the arm's controller and grip force in task.yaml, the scene's
+  // values in twin.yaml and scene.xml re-exported.
   std::filesystem::create_directories(out);
   std::filesystem::copy(
       twin, out,
@@ -137,6 +138,7 @@ core::Json IdentifyTwin(reality::Robot& robot, const std::filesystem::path& twin
   sim::TaskSpec refined_task = twin_task;
   refined_task.control.servo = result.identified.servo;
   refined_task.control.arm_scales = result.identified.arm;
+  if (result.grip_identified) refined_task.control.grip_force = result.identified.grip_force;
   real2sim::WriteTwinTask(refined_task, out);
   if (has_spec) {
     ApplyScene(spec, scene, result.identified.scene);

@@ -1,7 +1,7 @@
 // System identification of a twin on its robot, as one step: the experiments planned in the twin
-// (free-arm moves, the scripted task at full and half speed), run on the robot, the fit
-// (real2sim::IdentifyRobotPhysics), and the refined twin written. `twinforge sysid` and the main
-// job's sysid stage both call it.
+// (free moves of the arm and gripper, the scripted task at full and half speed), run on the
+// robot, the fit (real2sim::IdentifyRobotPhysics), and the refined twin written. `twinforge
+// sysid` and the main job's sysid stage both call it.
 #pragma once
 
 #include <filesystem>

@@ -35,11 +35,7 @@ sim::Task::ModelEdit HiddenRobotPhysics(const ControllerSpec& c) {
     const auto& r = index.robot;
     sim::ScaleArmPhysics(m, r,
                          {c.kp_scale, c.kd_scale, c.arm_damping_scale, c.arm_frictionloss_scale});
-    for (int k = 0; k < 2; ++k) {
-      const int a = r.finger_actuator[k];
-      m->actuator_forcerange[2 * a] = -c.gripper_force;
-      m->actuator_forcerange[2 * a + 1] = c.gripper_force;
-    }
+    sim::SetGripForce(m, r, c.gripper_force);
   };
 }
 

@@ -50,4 +50,19 @@ void ScaleArmPhysics(mjModel* m, const RobotIndex& robot, const ArmPhysicsScales
   }
 }
 
+void SetGripForce(mjModel* m, const RobotIndex& robot, double force) {
+  for (int k = 0; k < 2; ++k) {
+    const int a = robot.finger_actuator[k];
+    m->actuator_forcerange[2 * a] = -force;
+    m->actuator_forcerange[2 * a + 1] = force;
+  }
+}
+
+double GripForce(const mjModel* m, const RobotIndex& robot) {
+  double force = 0;
+  for (int k = 0; k < 2; ++k)
+    force = std::max(force, m->actuator_forcerange[2 * robot.finger_actuator[k] + 1]);
+  return force;
+}
+
 }  // namespace twinforge::sim

@@ -34,5 +34,9 @@ class ServoLag : public Env::SubstepHook {
 
 // Multiplies `m`'s arm values (assumed nominal) by `scales`.
 void ScaleArmPhysics(mjModel* m, const RobotIndex& robot, const ArmPhysicsScales& scales);
+// Sets both fingers' force limit (N, symmetric): how hard the gripper closes.
+void SetGripForce(mjModel* m, const RobotIndex& robot, double force);
+// Both fingers' force limit in `m` (the larger of the two, N).
+double GripForce(const mjModel* m, const RobotIndex& robot);
 
 }  // namespace twinforge::sim

@@ -58,5 +58,33 @@ TEST(ServoLag, ArmScalesInTheTaskScaleTheCompiledGains) {
   }
 }
 
+// The fingers' opening one control period after the gripper is commanded shut from open, with
+// the task's grip force set to `force` (0: the robot model's own).
+double WidthAfterClosing(double force, double* model_force) {
+  TaskSpec spec = LoadTaskSpec("open_drawer");
+  spec.control.grip_force = force;
+  const auto task = std::make_shared<const Task>(spec);
+  *model_force = GripForce(task->model(), task->index().robot);
+  Env env(task);
+  env.Reset(0, 0);
+  const RobotIndex& r = task->index().robot;
+  JointTargets targets;
+  targets.arm = env.ArmPositions();
+  targets.finger = 0;
+  env.StepTargets(targets);
+  return env.data()->qpos[r.finger_qpos[0]] + env.data()->qpos[r.finger_qpos[1]];
+}
+
+TEST(ServoLag, AGripForceInTheTaskSetsTheFingersLimit) {
+  double own = 0, weaker = 0;
+  const double own_width = WidthAfterClosing(0, &own);
+  const double weaker_width = WidthAfterClosing(45, &weaker);
+  EXPECT_DOUBLE_EQ(own, 70);  // panda.xml
+  EXPECT_DOUBLE_EQ(weaker, 45);
+  // Closing on nothing against the fingers' damping, the weaker grip closes more slowly.
+  EXPECT_LT(own_width, 0.06);
+  EXPECT_GT(weaker_width, own_width + 0.01);
+}
+
 }  // namespace
 }  // namespace twinforge::sim

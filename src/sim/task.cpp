@@ -162,6 +162,8 @@ Task::Task(TaskSpec spec, const ModelEdit& edit) : spec_(std::move(spec)) {
     index_.expert_steps.push_back(ids);
   }
   ScaleArmPhysics(model_.get(), index_.robot, spec_.control.arm_scales);
+  if (spec_.control.grip_force > 0)
+    SetGripForce(model_.get(), index_.robot, spec_.control.grip_force);
   if (edit) edit(model_.get(), index_);
 }
 

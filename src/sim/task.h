@@ -177,7 +177,7 @@ struct ExpertStep {
   // one nearest the tool where the step starts is kept for the step, so the wrist turns at most
   // half of 1/symmetry of a turn.
   int symmetry = 2;
-  bool world_orientation = false;            // orientation in the base frame, not the anchor's
+  bool world_orientation = false;  // orientation in the base frame, not the anchor's
   // move: a site on the held object; the step brings that site, not the tool, to the target
   // (an anchor on the held object itself is taken where the step starts).
   std::string carry;
@@ -514,6 +514,7 @@ struct ControlSpec {
   // The robot's low-level controller as identified on the real arm (`twinforge sysid`).
   ServoLagSpec servo;
   ArmPhysicsScales arm_scales;
+  double grip_force = 0;  // the fingers' force limit (N); 0: the robot model's own
   template <class A>
   void Serialize(A& a) {
     a.Enum("action", action,
@@ -523,6 +524,8 @@ struct ControlSpec {
     a("timestep", timestep);
     a("servo", servo);
     a("arm_scales", arm_scales);
+    a("grip_force", grip_force);
+    a.Require(grip_force >= 0, "grip_force", "a force in N (0: the robot model's own)");
     a.Require(substeps > 0, "substeps", "a positive integer");
     a.Require(timestep > 0 && timestep <= 0.02, "timestep", "a step in (0, 0.02] s");
     a.Require(servo.latency < substeps * timestep, "servo",

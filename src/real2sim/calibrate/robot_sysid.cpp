@@ -2,6 +2,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <cmath>
 #include <memory>
 
@@ -73,6 +74,14 @@ std::vector<sim::JointTargets> FreeArmTargets(const sim::TaskSpec& twin, double 
     for (int i = 0; i < hold; ++i) out.push_back(out_and_back);
     for (int i = 0; i < hold; ++i) out.push_back(rest);
   }
+  // The gripper to the far end of its range and back.
+  const int finger = robot.finger_actuator[0];
+  const double lo = task->model()->actuator_ctrlrange[2 * finger],
+               hi = task->model()->actuator_ctrlrange[2 * finger + 1];
+  sim::JointTargets gripper = rest;
+  gripper.finger = rest.finger - lo > hi - rest.finger ? lo : hi;
+  for (int i = 0; i < hold; ++i) out.push_back(gripper);
+  for (int i = 0; i < hold; ++i) out.push_back(rest);
   return out;
 }
 
@@ -112,6 +121,7 @@ namespace {
 sim::TaskSpec IdealController(sim::TaskSpec twin) {
   twin.control.servo = {};
   twin.control.arm_scales = {};
+  twin.control.grip_force = 0;
   return twin;
 }
 }  // namespace
@@ -121,21 +131,28 @@ TwinReplay::TwinReplay(const sim::TaskSpec& twin)
 
 std::vector<sim::ArmVector> TwinReplay::Run(const RobotPhysics& physics,
                                             const std::vector<PhysicalParameter>& scene,
-                                            const std::vector<sim::JointTargets>& targets) {
+                                            const std::vector<sim::JointTargets>& targets,
+                                            std::vector<double>* gripper_width) {
   if (physics.scene.size() != scene.size())
     throw core::ConfigError("sysid", "scene", "one value per scene parameter");
   env_.Reset(kSeed, kLevel);
   mjModel* m = env_.mutable_model();
-  sim::ScaleArmPhysics(m, task_->index().robot, physics.arm);
+  const sim::RobotIndex& robot = task_->index().robot;
+  sim::ScaleArmPhysics(m, robot, physics.arm);
+  if (physics.grip_force > 0) sim::SetGripForce(m, robot, physics.grip_force);
   for (size_t i = 0; i < scene.size(); ++i) SetParameter(m, scene[i], physics.scene[i]);
-  sim::ServoLag servo(physics.servo, task_->index().robot, task_->spec().control.timestep);
+  sim::ServoLag servo(physics.servo, robot, task_->spec().control.timestep);
   servo.Reset(env_.data());
   std::vector<sim::ArmVector> q;
   q.reserve(targets.size());
+  if (gripper_width) gripper_width->clear();
   for (const auto& t : targets) {
     servo.Command(t);
     env_.StepTargets(t, &servo);
     q.push_back(env_.ArmPositions());
+    if (gripper_width)
+      gripper_width->push_back(env_.data()->qpos[robot.finger_qpos[0]] +
+                               env_.data()->qpos[robot.finger_qpos[1]]);
   }
   return q;
 }
@@ -159,10 +176,33 @@ Eigen::VectorXd TwinReplay::Residuals(const RobotPhysics& physics,
   return r;
 }
 
+Eigen::VectorXd TwinReplay::GripperResiduals(const RobotPhysics& physics,
+                                             const std::vector<PhysicalParameter>& scene,
+                                             const std::vector<RobotTrajectory>& trajectories) {
+  long n = 0;
+  for (const auto& t : trajectories) {
+    if (t.gripper_width.size() != t.targets.size())
+      throw core::ConfigError("sysid", t.name, "one measured gripper opening per target");
+    n += static_cast<long>(t.targets.size());
+  }
+  Eigen::VectorXd r(n);
+  long at = 0;
+  std::vector<double> width;
+  for (const auto& t : trajectories) {
+    Run(physics, scene, t.targets, &width);
+    for (size_t i = 0; i < width.size(); ++i) r[at++] = width[i] - t.gripper_width[i];
+  }
+  return r;
+}
+
 double TwinReplay::Error(const RobotPhysics& physics, const std::vector<PhysicalParameter>& scene,
                          const std::vector<RobotTrajectory>& trajectories) {
   const Eigen::VectorXd r = Residuals(physics, scene, trajectories);
   return r.size() > 0 ? r.squaredNorm() / r.size() : 0;
+}
+
+double TwinReplay::NominalGripForce() const {
+  return sim::GripForce(task_->model(), task_->index().robot);
 }
 
 std::vector<double> TwinReplay::NominalScene(const std::vector<PhysicalParameter>& scene) const {
@@ -181,6 +221,8 @@ RobotSysidResult IdentifyRobotPhysics(const sim::TaskSpec& twin,
   TwinReplay replay(twin);
   r.start.servo = twin.control.servo;
   r.start.arm = twin.control.arm_scales;
+  r.start.grip_force =
+      twin.control.grip_force > 0 ? twin.control.grip_force : replay.NominalGripForce();
   r.start.scene = replay.NominalScene(scene);
   RobotPhysics physics = r.start;
   r.free_error_before = replay.Error(physics, scene, free_moves);
@@ -286,6 +328,36 @@ RobotSysidResult IdentifyRobotPhysics(const sim::TaskSpec& twin,
     r.controller_curve = fit.error;
     r.controller_relative_error = fit.relative_error;
   }
+  // The grip force, with that controller, from how the fingers moved in the free moves that
+  // closed or opened the gripper: on nothing they move as fast as the force limit lets them
+  // against their damping. Within a factor 10 of the twin's.
+  std::vector<RobotTrajectory> gripper_moves;
+  for (const auto& t : free_moves)
+    if (std::any_of(t.targets.begin(), t.targets.end(),
+                    [&](const sim::JointTargets& x) { return x.finger != t.targets[0].finger; }))
+      gripper_moves.push_back(t);
+  auto grip_error = [&](const RobotPhysics& p) {
+    const Eigen::VectorXd e = replay.GripperResiduals(p, scene, gripper_moves);
+    return e.size() > 0 ? e.squaredNorm() / e.size() : 0.0;
+  };
+  r.grip_error_before = grip_error(physics);
+  if (!gripper_moves.empty()) {
+    const double force = physics.grip_force;
+    const LeastSquaresResult fit = LeastSquaresLogSpace(
+        [&](const std::vector<double>& v) {
+          RobotPhysics p = physics;
+          p.grip_force = v[0];
+          tick("grip");
+          return replay.GripperResiduals(p, scene, gripper_moves);
+        },
+        {force}, {0.1 * force}, {10 * force}, options.controller);
+    r.replays += fit.replays;
+    r.grip_relative_error = fit.relative_error[0];
+    r.grip_identified = r.grip_relative_error <= options.max_relative_error;
+    if (r.grip_identified) physics.grip_force = fit.values[0];
+    spdlog::info("sysid: grip force {:.1f} N (relative error {:.2g}; the twin's {:.1f} N)",
+                 fit.values[0], r.grip_relative_error, force);
+  }
   // The scene, from the task runs, with that controller. A value the runs do not pin down to
   // `max_relative_error` keeps the twin's. Those error bars hold only if the model can fit the
   // runs at all, so with two runs or more each is also fitted alone, and a value on which they
@@ -325,6 +397,7 @@ RobotSysidResult IdentifyRobotPhysics(const sim::TaskSpec& twin,
     }
   }
   r.identified = physics;
+  r.grip_error_after = grip_error(physics);
   r.free_error_after = replay.Error(physics, scene, free_moves);
   r.task_error_after = replay.Error(physics, scene, task_runs);
   return r;
@@ -335,8 +408,10 @@ core::Json ToJson(const RobotSysidResult& r) {
     core::Json scene = core::Json::object();
     for (size_t i = 0; i < r.scene.size(); ++i)
       scene[std::string(ToString(r.scene[i].kind)) + ":" + r.scene[i].name] = p.scene[i];
-    return core::Json{
-        {"servo", core::ToJson(p.servo)}, {"arm_scales", core::ToJson(p.arm)}, {"scene", scene}};
+    return core::Json{{"servo", core::ToJson(p.servo)},
+                      {"arm_scales", core::ToJson(p.arm)},
+                      {"grip_force", p.grip_force},
+                      {"scene", scene}};
   };
   auto rms_deg = [](double mse) { return std::sqrt(mse) * 180 / M_PI; };
   return {{"start", physics(r.start)},
@@ -345,7 +420,12 @@ core::Json ToJson(const RobotSysidResult& r) {
            {{"before", rms_deg(r.free_error_before)}, {"after", rms_deg(r.free_error_after)}}},
           {"task_runs_rms_deg",
            {{"before", rms_deg(r.task_error_before)}, {"after", rms_deg(r.task_error_after)}}},
+          {"gripper_rms_mm",
+           {{"before", 1e3 * std::sqrt(r.grip_error_before)},
+            {"after", 1e3 * std::sqrt(r.grip_error_after)}}},
           {"controller_relative_error", r.controller_relative_error},
+          {"grip_relative_error", r.grip_relative_error},
+          {"grip_identified", r.grip_identified},
           {"scene_fitted", r.scene_fitted},
           {"scene_relative_error", r.scene_relative_error},
           {"scene_per_run", r.scene_per_run},

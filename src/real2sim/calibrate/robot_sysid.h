@@ -5,8 +5,8 @@
 //
 // Two kinds of experiment, both open loop from the task's level-0 start so that robot and twin
 // begin alike:
-// - free-arm moves: each joint stepped out and back in turn, nothing touched; they fix the
-//   controller;
+// - free moves: each joint stepped out and back in turn, then the gripper closed on nothing and
+//   opened; the arm's moves fix the controller, how fast the fingers close the grip force;
 // - task runs: the task's scripted expert run in the twin (say, grasp and pull the drawer), its
 //   joint targets replayed on the robot, at full and at half speed; with the controller known,
 //   how the arm lagged while pulling tells the scene's parameters.
@@ -38,16 +38,19 @@ struct RobotTrajectory {
 // commanded closed. A task run whose grip slipped off says little about what it pulled.
 bool GripHeld(const RobotTrajectory& t);
 
-// The arm's controller and physics as the twin models them, and the values of `scene`
-// parameters (in their order).
+// The arm's controller and physics as the twin models them, the fingers' force limit, and the
+// values of `scene` parameters (in their order).
 struct RobotPhysics {
   sim::ServoLagSpec servo;
   sim::ArmPhysicsScales arm;
+  double grip_force = 0;  // N
   std::vector<double> scene;
 };
 
-// Free-arm moves: from the level-0 start, each joint in turn is commanded `amplitude` rad out
-// (toward the side that keeps the tool higher) for `hold` control periods, then back.
+// Free moves: from the level-0 start, each joint in turn is commanded `amplitude` rad out
+// (toward the side that keeps the tool higher) for `hold` control periods, then back; then the
+// gripper is commanded shut for `hold` periods and open again for `hold` (closing on nothing, the
+// fingers move as fast as their force limit lets them).
 std::vector<sim::JointTargets> FreeArmTargets(const sim::TaskSpec& twin, double amplitude = 0.15,
                                               int hold = 6);
 // The scripted expert's joint targets in the twin from the level-0 start, each sent `repeat`
@@ -59,17 +62,25 @@ std::vector<sim::JointTargets> ExpertTargets(const sim::TaskSpec& twin, int repe
 class TwinReplay {
  public:
   explicit TwinReplay(const sim::TaskSpec& twin);
-  // The arm's positions after each target, with `physics` (`scene` parameters set by name).
+  // The arm's positions after each target, with `physics` (`scene` parameters set by name), and
+  // if `gripper_width` is given the gripper's opening after each.
   std::vector<sim::ArmVector> Run(const RobotPhysics& physics,
                                   const std::vector<PhysicalParameter>& scene,
-                                  const std::vector<sim::JointTargets>& targets);
+                                  const std::vector<sim::JointTargets>& targets,
+                                  std::vector<double>* gripper_width = nullptr);
   // The twin's joint positions minus the measured ones, every step and joint of every trajectory.
   Eigen::VectorXd Residuals(const RobotPhysics& physics,
                             const std::vector<PhysicalParameter>& scene,
                             const std::vector<RobotTrajectory>& trajectories);
+  // The twin's gripper opening minus the measured one (m), every step of every trajectory.
+  Eigen::VectorXd GripperResiduals(const RobotPhysics& physics,
+                                   const std::vector<PhysicalParameter>& scene,
+                                   const std::vector<RobotTrajectory>& trajectories);
   // Mean squared joint-position error (rad^2) against the trajectories.
   double Error(const RobotPhysics& physics, const std::vector<PhysicalParameter>& scene,
                const std::vector<RobotTrajectory>& trajectories);
+  // The twin's robot model's own grip force (N).
+  double NominalGripForce() const;
   // The twin's own values of `scene`.
   std::vector<double> NominalScene(const std::vector<PhysicalParameter>& scene) const;
 
@@ -98,6 +109,11 @@ struct RobotSysidResult {
   RobotPhysics start, identified;
   std::vector<PhysicalParameter> scene;
   double free_error_before = 0, free_error_after = 0;  // rad^2, free-arm moves
+  // The gripper's opening in the free moves (m^2); the grip force's relative standard error (0
+  // when the moves never closed the gripper) and whether it is identified (within
+  // `max_relative_error`; if not, the twin's is kept).
+  double grip_error_before = 0, grip_error_after = 0, grip_relative_error = 0;
+  bool grip_identified = false;
   double task_error_before = 0, task_error_after = 0;  // rad^2, task runs
   std::vector<double> controller_curve, scene_curve;   // best error per iteration
   // How well the runs pin each value down: the relative standard error from the fit's curvature
@@ -114,7 +130,8 @@ struct RobotSysidResult {
 };
 
 // Fits the controller to `free_moves` (starting from the twin's `control.servo` and
-// `arm_scales`: the joints' damping scale too, which acts nearly as kd does), then `scene`
+// `arm_scales`: the joints' damping scale too, which acts nearly as kd does), then the grip force
+// to how the gripper opened and closed in them, then `scene`
 // (starting from the twin's values) to `task_runs` with that controller. Either list may be empty
 // (that stage is skipped). `identified.scene` holds the fitted values where they are identified,
 // the twin's elsewhere.

@@ -8,7 +8,7 @@ namespace {
 using Kind = PhysicalParameter::Kind;
 
 // "The robot" is the drawer task's own scene with a lagging, softer arm whose joints are damped
-// more, and a stiffer drawer; the twin is the same scene with the model's values.
+// more, a weaker grip and a stiffer drawer; the twin is the same scene with the model's values.
 struct Synthetic {
   sim::TaskSpec twin = sim::LoadTaskSpec("open_drawer");
   std::vector<PhysicalParameter> scene{{Kind::kJointDamping, "drawer_slide", 0.05, 500},
@@ -17,13 +17,14 @@ struct Synthetic {
   Synthetic() {
     truth.servo = {0.3, 0.025};
     truth.arm = {0.75, 1.4, 1.5, 2.0};
+    truth.grip_force = 45;  // the model's: 70 N
     truth.scene = {16, 5};
   }
   RobotTrajectory Record(const std::string& name, std::vector<sim::JointTargets> targets) {
     RobotTrajectory t;
     t.name = name;
     t.targets = std::move(targets);
-    t.q = TwinReplay(twin).Run(truth, scene, t.targets);
+    t.q = TwinReplay(twin).Run(truth, scene, t.targets, &t.gripper_width);
     return t;
   }
 };
@@ -31,13 +32,21 @@ struct Synthetic {
 TEST(RobotSysid, FreeMovesStepEachJointOutAndBack) {
   Synthetic s;
   const auto targets = FreeArmTargets(s.twin, 0.15, 6);
-  ASSERT_EQ(targets.size(), 7u * 12u);
+  ASSERT_EQ(targets.size(), 8u * 12u);
   const sim::ArmVector rest = targets[6].arm;
+  const double open = targets[0].finger;
   for (int k = 0; k < sim::kArmDof; ++k) {
     const sim::ArmVector out = targets[12 * k].arm - rest;
     EXPECT_NEAR(std::abs(out[k]), 0.15, 1e-12);
     EXPECT_NEAR(out.norm(), 0.15, 1e-12);  // that joint only
     EXPECT_TRUE(targets[12 * k + 11].arm.isApprox(rest));
+    EXPECT_EQ(targets[12 * k].finger, open);
+  }
+  // Then the gripper, from open (the drawer's start) to shut and back, the arm at rest.
+  EXPECT_GT(open, 0.03);
+  for (int i = 0; i < 12; ++i) {
+    EXPECT_TRUE(targets[84 + i].arm.isApprox(rest));
+    EXPECT_EQ(targets[84 + i].finger, i < 6 ? 0.0 : open);
   }
 }
 
@@ -65,9 +74,19 @@ TEST(RobotSysid, RecoversAKnownControllerAndDrawer) {
   // The joints' damping acts nearly as kd does; held at the twin's, the rest came back 2% off
   // and the drawer 30% (docs/calibrate.md).
   EXPECT_NEAR(id.arm.damping, 1.5, 1e-5);
+  // The grip, from how fast the fingers closed on nothing (to 1e-14 N here). Held at the model's
+  // 70 N, the proxy drawer's values came back 8-31% off or at their bounds (docs/calibrate.md,
+  // stop 31).
+  EXPECT_NEAR(r.start.grip_force, 70, 1e-9);
+  EXPECT_TRUE(r.grip_identified);
+  EXPECT_NEAR(id.grip_force, 45, 1e-6);
+  EXPECT_LT(r.grip_error_after, 1e-6 * r.grip_error_before);
+  // The drawer, within 10% (the issue asks 15%). Not exactly: at 45 N the fingers slide along the
+  // bar as they pull, and the fit stalls where that makes the error rough (16.5 and 4.7; with the
+  // model's 70 N grip on both sides every value came back to 1e-5).
   ASSERT_EQ(r.scene_identified, std::vector<bool>({true, true}));
-  EXPECT_NEAR(id.scene[0], 16, 1e-5);
-  EXPECT_NEAR(id.scene[1], 5, 1e-5);
+  EXPECT_NEAR(id.scene[0], 16, 0.1 * 16);
+  EXPECT_NEAR(id.scene[1], 5, 0.1 * 5);
 }
 
 // The fit's error bars assume the model can fit the runs. Two runs of one drawer are fitted
@@ -78,6 +97,7 @@ TEST(RobotSysid, AValueTheRunsDisagreeOnIsNotIdentified) {
   Synthetic s;
   s.twin.control.servo = s.truth.servo;  // the controller already known: no free moves needed
   s.twin.control.arm_scales = s.truth.arm;
+  s.twin.control.grip_force = s.truth.grip_force;
   auto runs_of = [&](const std::vector<double>& first, const std::vector<double>& second) {
     std::vector<RobotTrajectory> runs;
     bool success = false;
