@@ -107,8 +107,7 @@ core::Json IdentifyTwin(reality::Robot& robot, const std::filesystem::path& twin
   // ... run on the robot.
   spdlog::info(
       "sysid: recording on the robot: free moves of the arm and gripper ({} steps), the task at "
-      "full and half "
-      "speed ({} and {} steps)",
+      "full and half speed ({} and {} steps)",
       free_targets.size(), full_speed.size(), half_speed.size());
   std::vector<real2sim::RobotTrajectory> free_moves{Record(robot, "free_arm", free_targets)};
   std::vector<real2sim::RobotTrajectory> task_runs, all_runs;

@@ -160,37 +160,39 @@ std::vector<sim::ArmVector> TwinReplay::Run(const RobotPhysics& physics,
 Eigen::VectorXd TwinReplay::Residuals(const RobotPhysics& physics,
                                       const std::vector<PhysicalParameter>& scene,
                                       const std::vector<RobotTrajectory>& trajectories) {
-  long n = 0;
-  for (const auto& t : trajectories) {
-    if (t.q.size() != t.targets.size())
-      throw core::ConfigError("sysid", t.name, "one measured position per target");
-    n += sim::kArmDof * static_cast<long>(t.q.size());
-  }
-  Eigen::VectorXd r(n);
-  long at = 0;
-  for (const auto& t : trajectories) {
-    const auto q = Run(physics, scene, t.targets);
-    for (size_t i = 0; i < q.size(); ++i, at += sim::kArmDof)
-      r.segment<sim::kArmDof>(at) = q[i] - t.q[i];
-  }
-  return r;
+  return Compare(physics, scene, trajectories, false);
 }
 
 Eigen::VectorXd TwinReplay::GripperResiduals(const RobotPhysics& physics,
                                              const std::vector<PhysicalParameter>& scene,
                                              const std::vector<RobotTrajectory>& trajectories) {
+  return Compare(physics, scene, trajectories, true);
+}
+
+Eigen::VectorXd TwinReplay::Compare(const RobotPhysics& physics,
+                                    const std::vector<PhysicalParameter>& scene,
+                                    const std::vector<RobotTrajectory>& trajectories,
+                                    bool gripper) {
+  const long per_step = gripper ? 1 : sim::kArmDof;
   long n = 0;
   for (const auto& t : trajectories) {
-    if (t.gripper_width.size() != t.targets.size())
-      throw core::ConfigError("sysid", t.name, "one measured gripper opening per target");
-    n += static_cast<long>(t.targets.size());
+    if ((gripper ? t.gripper_width.size() : t.q.size()) != t.targets.size())
+      throw core::ConfigError(
+          "sysid", t.name,
+          gripper ? "one measured gripper opening per target" : "one measured position per target");
+    n += per_step * static_cast<long>(t.targets.size());
   }
   Eigen::VectorXd r(n);
   long at = 0;
   std::vector<double> width;
   for (const auto& t : trajectories) {
-    Run(physics, scene, t.targets, &width);
-    for (size_t i = 0; i < width.size(); ++i) r[at++] = width[i] - t.gripper_width[i];
+    const auto q = Run(physics, scene, t.targets, &width);
+    for (size_t i = 0; i < q.size(); ++i, at += per_step) {
+      if (gripper)
+        r[at] = width[i] - t.gripper_width[i];
+      else
+        r.segment<sim::kArmDof>(at) = q[i] - t.q[i];
+    }
   }
   return r;
 }

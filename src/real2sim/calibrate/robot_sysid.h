@@ -85,6 +85,10 @@ class TwinReplay {
   std::vector<double> NominalScene(const std::vector<PhysicalParameter>& scene) const;
 
  private:
+  // The twin's joint positions (or with `gripper` its gripper opening) minus the measured ones.
+  Eigen::VectorXd Compare(const RobotPhysics& physics, const std::vector<PhysicalParameter>& scene,
+                          const std::vector<RobotTrajectory>& trajectories, bool gripper);
+
   std::shared_ptr<const sim::Task> task_;
   sim::Env env_;
 };
