@@ -67,12 +67,11 @@ double WidthAfterClosing(double force, double* model_force) {
   *model_force = GripForce(task->model(), task->index().robot);
   Env env(task);
   env.Reset(0, 0);
-  const RobotIndex& r = task->index().robot;
   JointTargets targets;
   targets.arm = env.ArmPositions();
   targets.finger = 0;
   env.StepTargets(targets);
-  return env.data()->qpos[r.finger_qpos[0]] + env.data()->qpos[r.finger_qpos[1]];
+  return 2 * env.FingerOpening();
 }
 
 TEST(ServoLag, AGripForceInTheTaskSetsTheFingersLimit) {

@@ -33,6 +33,10 @@ void SetController(RobotPhysics& p, const std::vector<double>& v) {
   p.arm.damping = v[5];
 }
 
+double MeanSquare(const Eigen::VectorXd& r) {
+  return r.size() > 0 ? r.squaredNorm() / r.size() : 0;
+}
+
 // A controller vector without its latency (index 1), and back.
 std::vector<double> WithoutLatency(std::vector<double> v) {
   v.erase(v.begin() + 1);
@@ -150,9 +154,7 @@ std::vector<sim::ArmVector> TwinReplay::Run(const RobotPhysics& physics,
     servo.Command(t);
     env_.StepTargets(t, &servo);
     q.push_back(env_.ArmPositions());
-    if (gripper_width)
-      gripper_width->push_back(env_.data()->qpos[robot.finger_qpos[0]] +
-                               env_.data()->qpos[robot.finger_qpos[1]]);
+    if (gripper_width) gripper_width->push_back(2 * env_.FingerOpening());
   }
   return q;
 }
@@ -199,8 +201,7 @@ Eigen::VectorXd TwinReplay::Compare(const RobotPhysics& physics,
 
 double TwinReplay::Error(const RobotPhysics& physics, const std::vector<PhysicalParameter>& scene,
                          const std::vector<RobotTrajectory>& trajectories) {
-  const Eigen::VectorXd r = Residuals(physics, scene, trajectories);
-  return r.size() > 0 ? r.squaredNorm() / r.size() : 0;
+  return MeanSquare(Residuals(physics, scene, trajectories));
 }
 
 double TwinReplay::NominalGripForce() const {
@@ -339,8 +340,7 @@ RobotSysidResult IdentifyRobotPhysics(const sim::TaskSpec& twin,
                     [&](const sim::JointTargets& x) { return x.finger != t.targets[0].finger; }))
       gripper_moves.push_back(t);
   auto grip_error = [&](const RobotPhysics& p) {
-    const Eigen::VectorXd e = replay.GripperResiduals(p, scene, gripper_moves);
-    return e.size() > 0 ? e.squaredNorm() / e.size() : 0.0;
+    return MeanSquare(replay.GripperResiduals(p, scene, gripper_moves));
   };
   r.grip_error_before = grip_error(physics);
   if (!gripper_moves.empty()) {
