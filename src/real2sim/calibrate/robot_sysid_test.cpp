@@ -2,32 +2,15 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
+
+#include "real2sim/calibrate/test_support.h"
+
 namespace twinforge::real2sim {
 namespace {
 
-using Kind = PhysicalParameter::Kind;
-
-// "The robot" is the drawer task's own scene with a lagging, softer arm whose joints are damped
-// more, a weaker grip and a stiffer drawer; the twin is the same scene with the model's values.
-struct Synthetic {
-  sim::TaskSpec twin = sim::LoadTaskSpec("open_drawer");
-  std::vector<PhysicalParameter> scene{{Kind::kJointDamping, "drawer_slide", 0.05, 500},
-                                       {Kind::kJointFriction, "drawer_slide", 0.05, 200}};
-  RobotPhysics truth;
-  Synthetic() {
-    truth.servo = {0.3, 0.025};
-    truth.arm = {0.75, 1.4, 1.5, 2.0};
-    truth.grip_force = 45;  // the model's: 70 N
-    truth.scene = {16, 5};
-  }
-  RobotTrajectory Record(const std::string& name, std::vector<sim::JointTargets> targets) {
-    RobotTrajectory t;
-    t.name = name;
-    t.targets = std::move(targets);
-    t.q = TwinReplay(twin).Run(truth, scene, t.targets, &t.gripper_width);
-    return t;
-  }
-};
+using testing::Synthetic;
 
 TEST(RobotSysid, FreeMovesStepEachJointOutAndBack) {
   Synthetic s;
@@ -55,7 +38,8 @@ TEST(RobotSysid, RecoversAKnownControllerAndDrawer) {
   bool expert_success = false;
   const std::vector<RobotTrajectory> free{s.Record("free", FreeArmTargets(s.twin))};
   const std::vector<RobotTrajectory> runs{
-      s.Record("half_speed", ExpertTargets(s.twin, 2, &expert_success))};
+      s.Record("half_speed", ExpertTargets(s.twin, 2, &expert_success)),
+      s.Record("third_speed", ExpertTargets(s.twin, 3))};
   ASSERT_TRUE(expert_success);
   RobotSysidOptions options;
   const RobotSysidResult r = IdentifyRobotPhysics(s.twin, s.scene, free, runs, options);
@@ -81,12 +65,30 @@ TEST(RobotSysid, RecoversAKnownControllerAndDrawer) {
   EXPECT_TRUE(r.grip_identified);
   EXPECT_NEAR(id.grip_force, 45, 1e-6);
   EXPECT_LT(r.grip_error_after, 1e-6 * r.grip_error_before);
-  // The drawer, within 10% (the issue asks 15%). Not exactly: at 45 N the fingers slide along the
-  // bar as they pull, and the fit stalls where that makes the error rough (16.5 and 4.7; with the
-  // model's 70 N grip on both sides every value came back to 1e-5).
-  ASSERT_EQ(r.scene_identified, std::vector<bool>({true, true}));
-  EXPECT_NEAR(id.scene[0], 16, 0.1 * 16);
-  EXPECT_NEAR(id.scene[1], 5, 0.1 * 5);
+  // The drawer, its mass too, within 1% (the issue asks 15%). Before stop 57 the one run was the
+  // expert re-planned at half speed: the damping and friction came back 3-6% off, and with the
+  // mass fitted too (the controller given) 16% and 11% off. With the full-speed run added to
+  // these, 50%, 24% and 25% off, all refused (docs/calibrate.md).
+  EXPECT_TRUE(r.scene_explains_runs);
+  ASSERT_EQ(r.scene_identified, std::vector<bool>({true, true, true}));
+  EXPECT_NEAR(id.scene[0], 16, 0.01 * 16);
+  EXPECT_NEAR(id.scene[1], 5, 0.01 * 5);
+  EXPECT_NEAR(id.scene[2], 1.4 * s.twin_mass, 0.01 * 1.4 * s.twin_mass);
+}
+
+// The task runs are one plan, each target sent once, twice or three times: re-planned at half
+// speed the expert took another path, on which its fingers brushed the proxy drawer's bar.
+TEST(RobotSysid, TheTaskRunsRepeatOnePlan) {
+  Synthetic s;
+  bool success = false;
+  const auto once = ExpertTargets(s.twin, 1, &success), thrice = ExpertTargets(s.twin, 3);
+  EXPECT_TRUE(success);
+  ASSERT_GT(once.size(), 10u);
+  ASSERT_EQ(thrice.size(), 3 * once.size());
+  for (size_t i = 0; i < thrice.size(); ++i) {
+    EXPECT_EQ(thrice[i].arm, once[i / 3].arm);
+    EXPECT_EQ(thrice[i].finger, once[i / 3].finger);
+  }
 }
 
 // The fit's error bars assume the model can fit the runs. Two runs of one drawer are fitted
@@ -98,6 +100,7 @@ TEST(RobotSysid, AValueTheRunsDisagreeOnIsNotIdentified) {
   s.twin.control.servo = s.truth.servo;  // the controller already known: no free moves needed
   s.twin.control.arm_scales = s.truth.arm;
   s.twin.control.grip_force = s.truth.grip_force;
+  s.scene.pop_back();  // the damping and friction only
   auto runs_of = [&](const std::vector<double>& first, const std::vector<double>& second) {
     std::vector<RobotTrajectory> runs;
     bool success = false;
@@ -107,7 +110,9 @@ TEST(RobotSysid, AValueTheRunsDisagreeOnIsNotIdentified) {
     s.truth.scene = second;
     runs.push_back(s.Record("half_speed", ExpertTargets(s.twin, 2, &success)));
     EXPECT_TRUE(success);
-    return IdentifyRobotPhysics(s.twin, s.scene, {}, runs);
+    RobotSysidOptions options;
+    options.scene_search.iterations = 0;  // the split check is what is tested here
+    return IdentifyRobotPhysics(s.twin, s.scene, {}, runs, options);
   };
   const RobotSysidResult same = runs_of({16, 5}, {16, 5});
   ASSERT_EQ(same.scene_per_run.size(), 2u);
@@ -126,6 +131,25 @@ TEST(RobotSysid, AValueTheRunsDisagreeOnIsNotIdentified) {
   EXPECT_GT(unlike.scene_per_run[0][0], 1.5 * unlike.scene_per_run[1][0]);  // 16 against 6
   EXPECT_EQ(unlike.scene_identified, std::vector<bool>({false, false}));
   EXPECT_EQ(unlike.identified.scene, unlike.start.scene);
+}
+
+// A model that lacks what the runs show cannot be trusted however tight its error bars: here the
+// twin grips with its 70 N where "the robot" grips with 45 (no free moves to tell it). Before
+// stop 57 such a fit took a friction 54% off. The search is off to keep the test short (with
+// it, the fit leaves the run 0.013 deg off and is refused too).
+TEST(RobotSysid, AFitThatLeavesTheRunsUnexplainedIsNotTaken) {
+  Synthetic s;
+  s.twin.control.servo = s.truth.servo;
+  s.twin.control.arm_scales = s.truth.arm;
+  const std::vector<RobotTrajectory> runs{s.Record("half_speed", ExpertTargets(s.twin, 2))};
+  RobotSysidOptions options;
+  options.scene_search.iterations = 0;
+  const RobotSysidResult r = IdentifyRobotPhysics(s.twin, s.scene, {}, runs, options);
+  std::printf("the fit leaves the run %.3g deg RMS off\n",
+              std::sqrt(r.scene_curve.back()) * 180 / M_PI);
+  EXPECT_FALSE(r.scene_explains_runs);
+  EXPECT_EQ(r.scene_identified, std::vector<bool>({false, false, false}));
+  EXPECT_EQ(r.identified.scene, r.start.scene);
 }
 
 TEST(RobotSysid, AGripIsHeldOnlyIfTheFingersStayApart) {
