@@ -18,9 +18,7 @@ using testing::Synthetic;
 // took a damping 54% off as identified: docs/calibrate.md); the search first finds all three.
 TEST(RobotSysid, TheSearchFindsADrawerFarFromTheTwins) {
   Synthetic s;
-  s.twin.control.servo = s.truth.servo;  // the controller already known: no free moves needed
-  s.twin.control.arm_scales = s.truth.arm;
-  s.twin.control.grip_force = s.truth.grip_force;
+  s.KnowTheController();
   const std::vector<double> truth{45, 14, 2.5 * s.twin_mass};
   s.truth.scene = truth;
   const std::vector<RobotTrajectory> runs{s.Record("half_speed", ExpertTargets(s.twin, 2))};

@@ -26,6 +26,12 @@ struct Synthetic {
     truth.grip_force = 45;  // the model's: 70 N
     truth.scene = {16, 5, 1.4 * twin_mass};
   }
+  // The twin given the robot's controller and grip: no free moves needed.
+  void KnowTheController() {
+    twin.control.servo = truth.servo;
+    twin.control.arm_scales = truth.arm;
+    twin.control.grip_force = truth.grip_force;
+  }
   RobotTrajectory Record(const std::string& name, std::vector<sim::JointTargets> targets) {
     RobotTrajectory t;
     t.name = name;
