@@ -97,9 +97,7 @@ TEST(RobotSysid, TheTaskRunsRepeatOnePlan) {
 // identified, however tight the joint fit's error bars.
 TEST(RobotSysid, AValueTheRunsDisagreeOnIsNotIdentified) {
   Synthetic s;
-  s.twin.control.servo = s.truth.servo;  // the controller already known: no free moves needed
-  s.twin.control.arm_scales = s.truth.arm;
-  s.twin.control.grip_force = s.truth.grip_force;
+  s.KnowTheController();
   s.scene.pop_back();  // the damping and friction only
   auto runs_of = [&](const std::vector<double>& first, const std::vector<double>& second) {
     std::vector<RobotTrajectory> runs;
@@ -134,22 +132,29 @@ TEST(RobotSysid, AValueTheRunsDisagreeOnIsNotIdentified) {
 }
 
 // A model that lacks what the runs show cannot be trusted however tight its error bars: here the
-// twin grips with its 70 N where "the robot" grips with 45 (no free moves to tell it). Before
-// stop 57 such a fit took a friction 54% off. The search is off to keep the test short (with
-// it, the fit leaves the run 0.013 deg off and is refused too).
+// twin grips with 70 N, then 55, where "the robot" grips with 45 (no free moves to tell it).
+// Before stop 57 such a fit took a friction 54% off. The search is off to keep the test short
+// (with it, the 70 N fit leaves the run 0.013 deg off and is refused too).
 TEST(RobotSysid, AFitThatLeavesTheRunsUnexplainedIsNotTaken) {
-  Synthetic s;
-  s.twin.control.servo = s.truth.servo;
-  s.twin.control.arm_scales = s.truth.arm;
-  const std::vector<RobotTrajectory> runs{s.Record("half_speed", ExpertTargets(s.twin, 2))};
-  RobotSysidOptions options;
-  options.scene_search.iterations = 0;
-  const RobotSysidResult r = IdentifyRobotPhysics(s.twin, s.scene, {}, runs, options);
-  std::printf("the fit leaves the run %.3g deg RMS off\n",
-              std::sqrt(r.scene_curve.back()) * 180 / M_PI);
-  EXPECT_FALSE(r.scene_explains_runs);
-  EXPECT_EQ(r.scene_identified, std::vector<bool>({false, false, false}));
-  EXPECT_EQ(r.identified.scene, r.start.scene);
+  for (double grip : {70.0, 55.0}) {
+    Synthetic s;
+    s.twin.control.servo = s.truth.servo;
+    s.twin.control.arm_scales = s.truth.arm;
+    s.twin.control.grip_force = grip;
+    const std::vector<RobotTrajectory> runs{s.Record("half_speed", ExpertTargets(s.twin, 2))};
+    RobotSysidOptions options;
+    options.scene_search.iterations = 0;
+    const RobotSysidResult r = IdentifyRobotPhysics(s.twin, s.scene, {}, runs, options);
+    const double rms_deg = std::sqrt(r.scene_curve.back()) * 180 / M_PI;
+    std::printf("grip %.0f N: the fit leaves the run %.3g deg RMS off, at %.2f / %.2f / %.2f kg\n",
+                grip, rms_deg, r.scene_fitted[0], r.scene_fitted[1], r.scene_fitted[2]);
+    // At 55 N the fit (3.5 / 2.3 / 6.7 kg against 16 / 5 / 4.1) is closer than stop 57's 0.01
+    // deg: the scanned drawer twin's calibrated fits were too (docs/calibrate.md, stop 58).
+    if (grip == 55.0) EXPECT_LT(rms_deg, 0.01);
+    EXPECT_FALSE(r.scene_explains_runs);
+    EXPECT_EQ(r.scene_identified, std::vector<bool>({false, false, false}));
+    EXPECT_EQ(r.identified.scene, r.start.scene);
+  }
 }
 
 TEST(RobotSysid, AGripIsHeldOnlyIfTheFingersStayApart) {
