@@ -138,9 +138,8 @@ TEST(RobotSysid, AValueTheRunsDisagreeOnIsNotIdentified) {
 TEST(RobotSysid, AFitThatLeavesTheRunsUnexplainedIsNotTaken) {
   for (double grip : {70.0, 55.0}) {
     Synthetic s;
-    s.twin.control.servo = s.truth.servo;
-    s.twin.control.arm_scales = s.truth.arm;
-    s.twin.control.grip_force = grip;
+    s.KnowTheController();
+    s.twin.control.grip_force = grip;  // all but the grip
     const std::vector<RobotTrajectory> runs{s.Record("half_speed", ExpertTargets(s.twin, 2))};
     RobotSysidOptions options;
     options.scene_search.iterations = 0;
