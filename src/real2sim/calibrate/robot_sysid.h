@@ -108,7 +108,7 @@ struct RobotSysidOptions {
   // worse: a fit that leaves more unexplained fits something the model lacks (a handle the scan
   // got wrong), and its error bars mean nothing. (The proxy drawer's runs fit to 2.6e-4 deg with
   // the world's own geometry; with its scanned twin to 0.033 deg, and with that twin calibrated
-  // to 0.007-0.009 deg, at values 17-68% off the hidden ones: docs/calibrate.md, stop 58.)
+  // to 0.007-0.009 deg, at values 17-80% off the hidden ones: docs/calibrate.md, stop 58.)
   double max_task_rms_deg = 0.003;
   template <class A>
   void Serialize(A& a) {
