@@ -42,6 +42,54 @@ const char* ToString(JointType type) {
   return "?";
 }
 
+std::vector<std::string> PartsOfMesh(const TwinSpec& spec, const std::string& mesh) {
+  std::vector<std::string> names;
+  for (const auto& part : spec.parts)
+    if (part.mesh == mesh) names.push_back(part.name);
+  return names;
+}
+
+int MoveParts(TwinSpec& spec, const std::vector<std::string>& parts, const core::Pose& motion,
+              bool cuts) {
+  auto move_point = [&](std::array<double, 3>& p) {
+    const Eigen::Vector3d moved = motion * Eigen::Vector3d(p.data());
+    p = {moved.x(), moved.y(), moved.z()};
+  };
+  auto move_box = [&](BoxSpec& box) {
+    const core::Pose pose = motion * box.pose();
+    box.center = {pose.translation.x(), pose.translation.y(), pose.translation.z()};
+    const Eigen::Vector3d euler = core::ToRollPitchYaw(pose.rotation);
+    box.euler = {euler.x(), euler.y(), euler.z()};
+  };
+  auto is_moved = [&](const std::string& name) {
+    return std::find(parts.begin(), parts.end(), name) != parts.end();
+  };
+  int moved = 0;
+  for (auto& part : spec.parts) {
+    if (!is_moved(part.name)) continue;
+    if (cuts)
+      for (auto& cut : part.cuts) move_box(cut.box);
+    for (auto& box : part.boxes) move_box(box);
+    if (part.com) move_point(*part.com);
+    ++moved;
+  }
+  for (auto& site : spec.sites) {
+    if (!is_moved(site.part)) continue;
+    move_point(site.position);
+    // The site's x stays level: its yaw follows where the motion turns it.
+    const Eigen::Vector3d x =
+        motion.rotation * Eigen::Vector3d(std::cos(site.yaw), std::sin(site.yaw), 0);
+    site.yaw = std::atan2(x.y(), x.x());
+  }
+  for (auto& joint : spec.joints) {
+    if (!is_moved(joint.child)) continue;
+    move_point(joint.origin);
+    const Eigen::Vector3d axis = motion.rotation * Eigen::Vector3d(joint.axis.data());
+    joint.axis = {axis.x(), axis.y(), axis.z()};
+  }
+  return moved;
+}
+
 Mesh BoxMesh(const BoxSpec& box) {
   Mesh mesh;
   const core::Pose pose = box.pose();

@@ -103,6 +103,57 @@ TEST(TwinSpec, ACutMakesTwoPiecesOpenOnlyAlongTheCut) {
 }
 
 // Every broken reference is named by file and field.
+// An object found to stand elsewhere: moving its mesh and the spec's parts of it together
+// keeps every cut on the same triangles, and its joint and sites go with it; another object's
+// stay.
+TEST(TwinSpec, WhatIsPlacedWithAMeshMovesWithIt) {
+  const auto dir = TwinDir("move");
+  WriteMesh(dir / "meshes/chest.ply", ChestMesh());
+  WriteText(dir / "twin.yaml", kSpec);
+  TwinSpec spec = LoadTwinSpec(dir / "twin.yaml");
+  spec.parts.push_back(spec.parts[1]);
+  spec.parts.back().name = "peg";
+  spec.parts.back().mesh = "meshes/peg.ply";
+  spec.parts.back().com = std::array<double, 3>{0.3, 0.2, 0.05};
+  spec.sites.push_back({"peg_tip", "peg", {0.3, 0.2, 0.1}, 0.5});
+  const Mesh drawer_before = PartMesh(spec.parts[1], dir);
+
+  // A quarter turn about z through (0.65, 0, 0) and 1 cm up.
+  const core::Quat quarter = core::Yaw(M_PI / 2);
+  const Eigen::Vector3d pivot(0.65, 0, 0);
+  const core::Pose motion{pivot + Eigen::Vector3d(0, 0, 0.01) - quarter * pivot, quarter};
+  const TwinSpec before = spec;
+  EXPECT_EQ(MoveParts(spec, PartsOfMesh(spec, "meshes/chest.ply"), motion, true), 2);
+  Mesh moved = ReadMesh(dir / "meshes/chest.ply");
+  for (auto& v : moved.vertices) v = motion * v;
+  WriteMesh(dir / "meshes/chest.ply", moved);
+
+  const Mesh drawer_after = PartMesh(spec.parts[1], dir);
+  ASSERT_EQ(drawer_after.triangles.size(), drawer_before.triangles.size());
+  EXPECT_NEAR(drawer_after.Area(), drawer_before.Area(), 1e-9);
+  const Eigen::Vector3d axis(spec.joints[0].axis.data());
+  EXPECT_TRUE(axis.isApprox(Eigen::Vector3d(0, -1, 0), 1e-9)) << axis.transpose();
+  const Eigen::Vector3d handle(spec.sites[0].position.data());
+  EXPECT_TRUE(handle.isApprox(Eigen::Vector3d(0.65, -0.17, 0.16), 1e-9)) << handle.transpose();
+  EXPECT_NEAR(spec.sites[0].yaw, M_PI / 2, 1e-9);
+  // The other object's part and site did not move.
+  EXPECT_EQ(spec.parts[2].cuts[0].box.center, before.parts[2].cuts[0].box.center);
+  EXPECT_EQ(*spec.parts[2].com, *before.parts[2].com);
+  EXPECT_EQ(spec.sites[1].position, before.sites[1].position);
+  EXPECT_EQ(spec.sites[1].yaw, 0.5);
+
+  // Without its cuts, a part's solids and sites move and its piece of the mesh stays.
+  spec.parts[2].boxes.push_back({});
+  const TwinSpec solids_before = spec;
+  EXPECT_EQ(MoveParts(spec, {"peg"}, motion, false), 1);
+  EXPECT_EQ(spec.parts[2].cuts[0].box.center, solids_before.parts[2].cuts[0].box.center);
+  const Eigen::Vector3d box(spec.parts[2].boxes[0].center.data());
+  EXPECT_TRUE(box.isApprox(motion * Eigen::Vector3d::Zero(), 1e-9)) << box.transpose();
+  EXPECT_NEAR(spec.parts[2].boxes[0].euler[2], M_PI / 2, 1e-9);
+  EXPECT_NE(spec.sites[1].position, solids_before.sites[1].position);
+  EXPECT_EQ(spec.parts[1].boxes.size(), solids_before.parts[1].boxes.size());
+}
+
 TEST(TwinSpec, ErrorsNameTheFileAndField) {
   const auto dir = TwinDir("errors");
   WriteMesh(dir / "meshes/chest.ply", ChestMesh());
