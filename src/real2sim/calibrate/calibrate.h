@@ -53,6 +53,20 @@ struct MeshRefineOptions {
   bool frame_poses = true;
   double pose_learning_rate = 0.15;  // mrad and mm per step
   double pose_prior = 0.01;          // x the mean squared correction (mrad^2, mm^2)
+  // Then each object is placed on the table (RefineTwinMeshes, PlaceObjects), since where the
+  // scan put it is off by a few mm and degrees: one shift along the table and one turn about the
+  // upright through its centroid, shared by every frame, each frame seen from where it was
+  // corrected to. An object is its refined mesh, or the solids its parts collide with where they
+  // collide as solids and show it as its mesh does (a peg and its hole, fitted to the scan's
+  // blur; not a mug's cylinder, without its handle). The turn is counted in mm
+  // at the object's rms radius about that line, so that one rate and one prior serve both.
+  bool object_poses = true;
+  double object_pose_learning_rate = 0.1;  // mm per step
+  double object_pose_prior = 0.01;         // x the mean squared correction (mm^2)
+  // An object keeps the pose the scan gave it unless its placement lowers the mean depth error
+  // over its own pixels by at least this share: a move that buys less is not what the frames
+  // tell (placed, the pegs' solids explained their pixels 14-22% better).
+  double object_pose_min_gain = 0.1;
   template <class A>
   void Serialize(A& a) {
     a("iterations", iterations);
@@ -70,6 +84,10 @@ struct MeshRefineOptions {
     a("frame_poses", frame_poses);
     a("pose_learning_rate", pose_learning_rate);
     a("pose_prior", pose_prior);
+    a("object_poses", object_poses);
+    a("object_pose_learning_rate", object_pose_learning_rate);
+    a("object_pose_prior", object_pose_prior);
+    a("object_pose_min_gain", object_pose_min_gain);
     a.Require(iterations >= 0, "iterations", "zero (no refinement) or more steps");
     a.Require(frames_per_step >= 1, "frames_per_step", "at least one frame");
     a.Require(width >= 16, "width", "at least 16 px");
@@ -82,6 +100,10 @@ struct MeshRefineOptions {
     a.Require(max_offset > 0, "max_offset", "a positive distance in mm");
     a.Require(pose_learning_rate > 0 && pose_prior >= 0, "pose_learning_rate",
               "a positive step and a non-negative prior");
+    a.Require(object_pose_learning_rate > 0 && object_pose_prior >= 0, "object_pose_learning_rate",
+              "a positive step (mm) and a non-negative prior");
+    a.Require(object_pose_min_gain >= 0 && object_pose_min_gain < 1, "object_pose_min_gain",
+              "a share from 0 (any gain) to under 1");
   }
 };
 
@@ -202,6 +224,14 @@ struct MeshRefinement {
   double inliers_before = 0, inliers_after = 0;          // share of those pixels within outlier
   double offset_rms = 0, offset_max = 0;                 // mm
   std::vector<core::Pose> frame_corrections;  // per view: true pose = reported * correction
+  // Per mesh, the motion PlaceObjects found for it (base frame; none from RefineMeshes): the
+  // placed vertices are the correction applied to the refined ones.
+  std::vector<core::Pose> object_corrections;
+  std::vector<Eigen::Vector3d> object_centroids;  // per mesh, what it turned about (m)
+  // Per mesh, the mean depth error over its own pixels at its start and placed (mm), and whether
+  // the placement was kept (object_pose_min_gain).
+  std::vector<double> object_errors_before, object_errors_after;
+  std::vector<bool> object_placed;
   double seconds = 0;
   nlohmann::json ToJson() const;
 };
@@ -209,8 +239,11 @@ struct MeshRefinement {
 // Refines the scanned meshes of the twin in `twin_dir` (the files its twin.yaml parts name)
 // against the frames of `scan` (the scan the twin was built from: its wrist-camera poses are the
 // robot's own), each frame reduced to `options.width` and shown with the arm at its joints and
-// the table. Rewrites the mesh files, re-exports scene.xml (the visual meshes and the scan-fitted
-// collision boxes follow the new surfaces) and writes twin_dir/calibration/mesh.json with
+// the table. With options.object_poses each object is then placed (PlaceObjects): its mesh and
+// what twin.yaml places with it (cuts, solids, sites, joint) move with it, and twin.yaml is
+// rewritten (the old one kept as twin.yaml.bak). Rewrites the mesh files, re-exports scene.xml
+// (the visual meshes and the scan-fitted collision boxes follow the new surfaces) and writes
+// twin_dir/calibration/mesh.json with
 // mesh_NN.png per frame (real | twin before | after | depth error before | after). Throws
 // ConfigError when the twin has no scanned mesh or no frame shows one.
 MeshRefinement RefineTwinMeshes(const std::filesystem::path& twin_dir, const core::Scan& scan,

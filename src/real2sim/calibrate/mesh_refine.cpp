@@ -38,6 +38,10 @@ torch::Tensor Rows(const std::vector<Eigen::Vector3d>& points) {
 struct Packed {
   torch::Tensor vertices, normals, colors, faces, edges;
   std::vector<int64_t> first;  // each mesh's first vertex
+  // Each mesh's centroid (the mean of its vertices) and the rms distance of its vertices from
+  // the upright line through it, m.
+  std::vector<Eigen::Vector3d> centroid;
+  std::vector<double> radius;
 };
 
 Packed Pack(const std::vector<Mesh>& meshes) {
@@ -50,6 +54,13 @@ Packed Pack(const std::vector<Mesh>& meshes) {
     p.first.push_back(first);
     const auto normals = VertexNormals(mesh);
     v.insert(v.end(), mesh.vertices.begin(), mesh.vertices.end());
+    Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+    for (const auto& x : mesh.vertices) centroid += x;
+    centroid /= std::max<size_t>(1, mesh.vertices.size());
+    double spread = 0;
+    for (const auto& x : mesh.vertices) spread += (x - centroid).head<2>().squaredNorm();
+    p.centroid.push_back(centroid);
+    p.radius.push_back(std::sqrt(spread / std::max<size_t>(1, mesh.vertices.size())));
     n.insert(n.end(), normals.begin(), normals.end());
     for (size_t i = 0; i < mesh.vertices.size(); ++i)
       c.push_back(mesh.colors.size() == mesh.vertices.size() ? mesh.colors[i]
@@ -101,6 +112,56 @@ std::vector<torch::Tensor> Ownership(const Packed& p, const std::vector<RefineVi
   return owned;
 }
 
+// Per view, which of the meshes each owned pixel shows (-1: none of them, or more than one):
+// each mesh is rendered in its own shade of red.
+std::vector<torch::Tensor> MeshIds(const Packed& p, const std::vector<RefineView>& views,
+                                   const std::vector<torch::Tensor>& owned,
+                                   const SoftRasterOptions& raster) {
+  torch::NoGradGuard no_grad;
+  const int64_t count = static_cast<int64_t>(p.first.size()) - 1;
+  auto shade = torch::zeros_like(p.vertices);
+  for (int64_t m = 0; m < count; ++m)
+    shade.slice(0, p.first[m], p.first[m + 1]).fill_(static_cast<double>(m + 1) / count);
+  const RasterMesh marked{p.vertices, p.faces, shade};
+  std::vector<torch::Tensor> ids;
+  for (size_t i = 0; i < views.size(); ++i) {
+    const SoftImage image = SoftRasterize(Scene(marked, views[i]), views[i].intrinsics,
+                                          ToTensor(views[i].camera_to_base), raster);
+    const auto code = image.rgb.select(2, 0) * count;
+    const auto id = torch::round(code) - 1;
+    // Within 1% of a shade, as Ownership asks of the one shade.
+    const auto pure = (code - torch::round(code)).abs() < 0.01 * torch::round(code);
+    ids.push_back(torch::where(owned[i] & pure, id, torch::full_like(id, -1)).to(torch::kInt64));
+  }
+  return ids;
+}
+
+// Per mesh, the mean absolute depth error (mm) over the pixels `ids` gives it that agree within
+// the outlier distance, with the meshes at `vertices` seen from the views' own poses.
+std::vector<double> MeshDepthErrors(const Packed& p, const torch::Tensor& vertices,
+                                    const std::vector<RefineView>& views,
+                                    const std::vector<torch::Tensor>& ids,
+                                    const MeshRefineOptions& o, const SoftRasterOptions& raster) {
+  torch::NoGradGuard no_grad;
+  const size_t count = p.first.size() - 1;
+  std::vector<double> sum(count, 0), n(count, 0);
+  const RasterMesh refined{vertices, p.faces, p.colors};
+  for (size_t i = 0; i < views.size(); ++i) {
+    const SoftImage image = SoftRasterize(Scene(refined, views[i]), views[i].intrinsics,
+                                          ToTensor(views[i].camera_to_base), raster);
+    const auto r = ((image.depth - views[i].depth) * 1000).abs();
+    for (size_t m = 0; m < count; ++m) {
+      const auto in = (ids[i] == static_cast<int64_t>(m)) & (r < o.outlier);
+      sum[m] += r.masked_select(in).sum().item<double>();
+      n[m] += in.sum().item<double>();
+    }
+  }
+  std::vector<double> error(count, 0);
+  for (size_t m = 0; m < count; ++m)
+    if (n[m] > 0) error[m] = sum[m] / n[m];
+  return error;
+}
+
 // A camera pose turned about its own centre by delta[0:3] (rotation vector) and moved by
 // delta[3:6], both in the base frame (rad, m): a correction common to all views is then the
 // same numbers in each.
@@ -138,6 +199,35 @@ Agreement Agree(const Packed& p, const torch::Tensor& vertices, const torch::Ten
   if (inliers > 0) a.depth_mm = depth / inliers, a.rgb = rgb / inliers;
   if (pixels > 0) a.inliers = static_cast<double>(inliers) / pixels;
   return a;
+}
+
+// The objects PlaceObjects places, one per mesh file: the solids of its parts where they all
+// collide as solids and show the object as the mesh does (what the physics holds and inserts:
+// a peg's box, its hole's walls), else the refined mesh. Solids show the object when at least
+// 90% of the mesh's vertices lie within 3 mm of them: a mug's cylinder lacks the handle and the
+// cavity the frames see, and placed by them it moved 1.7 mm the wrong way.
+std::vector<Mesh> ObjectsOf(const TwinSpec& spec, const std::vector<std::string>& files,
+                            const std::vector<Mesh>& refined) {
+  std::vector<Mesh> objects;
+  for (size_t i = 0; i < files.size(); ++i) {
+    Mesh solids;
+    bool all = true;
+    for (const auto& name : PartsOfMesh(spec, files[i])) {
+      const PartSpec& part = *std::find_if(spec.parts.begin(), spec.parts.end(),
+                                           [&](const PartSpec& p) { return p.name == name; });
+      all = all && part.collision == PartSpec::Collision::kSolids;
+      for (const auto& box : part.boxes) AppendMesh(solids, BoxMesh(box));
+    }
+    double near = 0;
+    if (all)
+      for (const double d : SurfaceDistances(refined[i].vertices, solids)) near += d < 0.003;
+    const double share = all ? near / std::max<size_t>(1, refined[i].vertices.size()) : 0;
+    if (all)
+      spdlog::info("object placement: {}: {:.0f}% of the mesh within 3 mm of its solids", files[i],
+                   100 * share);
+    objects.push_back(share >= 0.9 ? solids : refined[i]);
+  }
+  return objects;
 }
 
 }  // namespace
@@ -205,7 +295,18 @@ nlohmann::json MeshRefinement::ToJson() const {
   for (const auto& c : frame_corrections)
     frames.push_back({{"translation_mm", 1000 * c.translation.norm()},
                       {"rotation_deg", Eigen::AngleAxisd(c.rotation).angle() * 180 / M_PI}});
+  nlohmann::json objects = nlohmann::json::array();
+  for (size_t i = 0; i < object_corrections.size(); ++i) {
+    const core::Pose& c = object_corrections[i];
+    const Eigen::Vector3d& at = object_centroids[i];
+    objects.push_back({{"translation_mm", 1000 * (c * at - at).norm()},
+                       {"rotation_deg", Eigen::AngleAxisd(c.rotation).angle() * 180 / M_PI},
+                       {"depth_error_mm",
+                        {{"before", object_errors_before[i]}, {"placed", object_errors_after[i]}}},
+                       {"placed", static_cast<bool>(object_placed[i])}});
+  }
   return {{"frame_corrections", frames},
+          {"object_corrections", objects},
           {"depth_error_mm", {{"before", depth_error_before}, {"after", depth_error_after}}},
           {"rgb_error", {{"before", rgb_error_before}, {"after", rgb_error_after}}},
           {"inliers", {{"before", inliers_before}, {"after", inliers_after}}},
@@ -215,8 +316,13 @@ nlohmann::json MeshRefinement::ToJson() const {
           {"seconds", seconds}};
 }
 
-MeshRefinement RefineMeshes(const std::vector<Mesh>& meshes, const std::vector<RefineView>& views,
-                            const MeshRefineOptions& o, core::Progress* progress) {
+namespace {
+
+// RefineMeshes (the offsets, the colours and, with o.frame_poses, the frames' poses), or with
+// `place` PlaceObjects (the objects' poses alone).
+MeshRefinement Refine(const std::vector<Mesh>& meshes, const std::vector<RefineView>& views,
+                      const MeshRefineOptions& o, bool place, core::Progress* progress) {
+  const bool shape = !place, frame_poses = o.frame_poses && !place;
   const auto start = std::chrono::steady_clock::now();
   const Packed p = Pack(meshes);
   SoftRasterOptions raster;
@@ -231,10 +337,34 @@ MeshRefinement RefineMeshes(const std::vector<Mesh>& meshes, const std::vector<R
                                 std::to_string(views.size()) + " does)");
 
   const int64_t vertex_count = p.vertices.size(0);
-  auto offsets = torch::zeros({vertex_count}, kDouble).requires_grad_(true);  // mm
-  auto colors = p.colors.clone().requires_grad_(true);
-  auto place = [&](const torch::Tensor& mm) {
-    return p.vertices + p.normals * (mm * 1e-3).unsqueeze(1);
+  const int64_t mesh_count = static_cast<int64_t>(meshes.size());
+  auto offsets = torch::zeros({vertex_count}, kDouble).requires_grad_(shape);  // mm
+  auto colors = p.colors.clone().requires_grad_(shape);
+  // Each mesh's motion on the table: a turn about the upright through its centroid (the angle
+  // times the mesh's rms radius about it, mm) and a shift along x and y (mm), base frame. What
+  // stands on the table neither tilts nor sinks; a 6-dof motion tilted the peg's block 1 deg and
+  // put the peg's tip under the table.
+  auto motions = torch::zeros({mesh_count, 3}, kDouble);
+  if (place) motions.requires_grad_(true);
+  const auto zeros = torch::zeros({2}, kDouble), zero = torch::zeros({1}, kDouble);
+  auto turn = [&](const torch::Tensor& m, size_t i) {
+    return RotationMatrix(
+        torch::cat({zeros, m[i].slice(0, 0, 1) * (1e-3 / std::max(p.radius[i], 1e-6))}));
+  };
+  auto shift = [&](const torch::Tensor& m, size_t i) {
+    return torch::cat({m[i].slice(0, 1, 3), zero}) * 1e-3;
+  };
+  auto posed = [&](const torch::Tensor& mm, const torch::Tensor& m) {
+    const auto offset = p.vertices + p.normals * (mm * 1e-3).unsqueeze(1);
+    if (!place) return offset;
+    std::vector<torch::Tensor> moved;
+    for (size_t i = 0; i < meshes.size(); ++i) {
+      const auto c =
+          torch::tensor({p.centroid[i].x(), p.centroid[i].y(), p.centroid[i].z()}, kDouble);
+      const auto local = offset.slice(0, p.first[i], p.first[i + 1]) - c;
+      moved.push_back(torch::matmul(local, turn(m, i).transpose(0, 1)) + c + shift(m, i));
+    }
+    return torch::cat(moved);
   };
 
   // Each frame's pose correction (rotation vector in mrad, translation in mm, Corrected): a
@@ -242,7 +372,7 @@ MeshRefinement RefineMeshes(const std::vector<Mesh>& meshes, const std::vector<R
   // are taken about their mean: the errors are the arm's, not a bias, and a shift shared by every
   // frame would move the meshes with it wherever the table and the arm do not pin it down.
   auto free = torch::zeros({static_cast<int64_t>(views.size()), 6}, kDouble);
-  if (o.frame_poses) free.requires_grad_(true);
+  if (frame_poses) free.requires_grad_(true);
   auto centred = [&] { return free - free.mean(0, true); };
   auto corrected = [&](const torch::Tensor& c) {
     std::vector<core::Pose> poses;
@@ -254,45 +384,45 @@ MeshRefinement RefineMeshes(const std::vector<Mesh>& meshes, const std::vector<R
   MeshRefinement result;
   const Agreement before =
       Agree(p, p.vertices, p.colors, views, corrected(free.detach()), owned, o, raster);
-  // Offsets, colours and frame poses step at their own rates: one group each.
+  // Offsets, colours, frame poses and object poses step at their own rates: one group each.
   std::vector<torch::optim::OptimizerParamGroup> groups;
-  for (const auto& [tensor, rate] :
-       {std::pair{offsets, o.learning_rate}, std::pair{colors, o.color_learning_rate},
-        std::pair{free, o.pose_learning_rate}})
-    groups.emplace_back(std::vector<torch::Tensor>{tensor},
-                        std::make_unique<torch::optim::AdamOptions>(rate));
+  const double rates[] = {o.learning_rate, o.color_learning_rate, o.pose_learning_rate,
+                          o.object_pose_learning_rate};
+  const torch::Tensor tensors[] = {offsets, colors, free, motions};
+  for (int g = 0; g < 4; ++g)
+    groups.emplace_back(std::vector<torch::Tensor>{tensors[g]},
+                        std::make_unique<torch::optim::AdamOptions>(rates[g]));
   torch::optim::Adam adam(groups, torch::optim::AdamOptions(o.learning_rate));
-  const double rates[] = {o.learning_rate, o.color_learning_rate, o.pose_learning_rate};
 
   const int batch = std::min<int>(o.frames_per_step, static_cast<int>(seen.size()));
   for (int step = 0; step < o.iterations; ++step) {
     // Cosine decay to a tenth: large moves first, then settle.
     const double decay = 0.1 + 0.45 * (1 + std::cos(M_PI * step / std::max(1, o.iterations)));
-    for (int g = 0; g < 3; ++g)
+    for (int g = 0; g < 4; ++g)
       static_cast<torch::optim::AdamOptions&>(adam.param_groups()[g].options())
           .lr(rates[g] * decay);
     adam.zero_grad();
-    const RasterMesh refined{place(offsets), p.faces, colors};
+    const RasterMesh refined{posed(offsets, motions), p.faces, colors};
     const auto corrections = centred();
     auto data = torch::zeros({}, kDouble);
     for (int b = 0; b < batch; ++b) {
       const size_t i = seen[(static_cast<size_t>(step) * batch + b) % seen.size()];
       const RefineView& view = views[i];
-      const CameraTensor camera = o.frame_poses
+      const CameraTensor camera = frame_poses
                                       ? Corrected(view.camera_to_base, corrections[i] * 1e-3)
                                       : ToTensor(view.camera_to_base);
       const SoftImage image = SoftRasterize(Scene(refined, view), view.intrinsics, camera, raster);
       const auto r = (image.depth - view.depth) * 1000;
       const auto close = r.detach().abs() < o.outlier;
       const auto in = owned[i] & close;
-      if (o.frame_poses) {
+      if (frame_poses) {
         // What else the frame shows places its camera too (the table, the arm: known shapes).
         const auto rest = ~owned[i] & close & (view.depth > 0) & (image.silhouette.detach() > 0.99);
         if (rest.any().item<bool>()) data = data + Huber(r.masked_select(rest), o.huber).mean();
       }
       if (!in.any().item<bool>()) continue;
       data = data + Huber(r.masked_select(in), o.huber).mean();
-      if (o.rgb_weight > 0)
+      if (o.rgb_weight > 0 && shape)
         data = data + o.rgb_weight * (image.rgb - view.rgb).abs().mean(2).masked_select(in).mean();
     }
     auto loss = data / batch;
@@ -302,7 +432,8 @@ MeshRefinement RefineMeshes(const std::vector<Mesh>& meshes, const std::vector<R
                                        .square()
                                        .mean();
     loss = loss + o.prior * offsets.square().mean();
-    if (o.frame_poses) loss = loss + o.pose_prior * corrections.square().mean();
+    if (frame_poses) loss = loss + o.pose_prior * corrections.square().mean();
+    if (place) loss = loss + o.object_pose_prior * motions.square().mean();
     loss.backward();
     adam.step();
     {
@@ -315,11 +446,33 @@ MeshRefinement RefineMeshes(const std::vector<Mesh>& meshes, const std::vector<R
   }
 
   torch::NoGradGuard no_grad;
-  const auto vertices = place(offsets);
+  if (place) {
+    // An object keeps its pose unless its placement explains its own pixels clearly better: a
+    // move that buys less was not told by the frames.
+    const auto ids = MeshIds(p, views, owned, raster);
+    result.object_errors_before =
+        MeshDepthErrors(p, posed(offsets, torch::zeros_like(motions)), views, ids, o, raster);
+    result.object_errors_after = MeshDepthErrors(p, posed(offsets, motions), views, ids, o, raster);
+    for (size_t m = 0; m < meshes.size(); ++m) {
+      const bool placed = result.object_errors_after[m] <
+                          (1 - o.object_pose_min_gain) * result.object_errors_before[m];
+      if (!placed) motions[m].zero_();
+      result.object_placed.push_back(placed);
+    }
+  }
+  const auto vertices = posed(offsets, motions);
   const std::vector<core::Pose> poses = corrected(centred());
   const Agreement after = Agree(p, vertices, colors, views, poses, owned, o, raster);
   for (size_t i = 0; i < views.size(); ++i)
     result.frame_corrections.push_back(views[i].camera_to_base.Inverse() * poses[i]);
+  // x -> R (x - c) + c + t, as a pose.
+  for (size_t i = 0; place && i < meshes.size(); ++i) {
+    const CameraTensor motion{turn(motions, i), shift(motions, i)};
+    core::Pose pose = ToPose(motion);
+    pose.translation += p.centroid[i] - pose.rotation * p.centroid[i];
+    result.object_corrections.push_back(pose);
+    result.object_centroids.push_back(p.centroid[i]);
+  }
   result.depth_error_before = before.depth_mm;
   result.depth_error_after = after.depth_mm;
   result.rgb_error_before = before.rgb;
@@ -340,13 +493,32 @@ MeshRefinement RefineMeshes(const std::vector<Mesh>& meshes, const std::vector<R
     result.meshes.push_back(std::move(out));
   }
   result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  spdlog::info(
-      "mesh refinement: depth error {:.2f} -> {:.2f} mm, colour {:.3f} -> {:.3f}, offsets rms "
-      "{:.2f} "
-      "mm (max {:.2f}), {:.0f} s",
-      result.depth_error_before, result.depth_error_after, result.rgb_error_before,
-      result.rgb_error_after, result.offset_rms, result.offset_max, result.seconds);
+  for (size_t m = 0; m < result.object_placed.size(); ++m)
+    spdlog::info("object placement: object {}: depth error {:.2f} -> {:.2f} mm, {}", m,
+                 result.object_errors_before[m], result.object_errors_after[m],
+                 result.object_placed[m] ? "placed" : "not placed (too little better)");
+  if (place)
+    spdlog::info("object placement: depth error {:.2f} -> {:.2f} mm, {:.0f} s",
+                 result.depth_error_before, result.depth_error_after, result.seconds);
+  else
+    spdlog::info(
+        "mesh refinement: depth error {:.2f} -> {:.2f} mm, colour {:.3f} -> {:.3f}, offsets rms "
+        "{:.2f} mm (max {:.2f}), {:.0f} s",
+        result.depth_error_before, result.depth_error_after, result.rgb_error_before,
+        result.rgb_error_after, result.offset_rms, result.offset_max, result.seconds);
   return result;
+}
+
+}  // namespace
+
+MeshRefinement RefineMeshes(const std::vector<Mesh>& meshes, const std::vector<RefineView>& views,
+                            const MeshRefineOptions& options, core::Progress* progress) {
+  return Refine(meshes, views, options, false, progress);
+}
+
+MeshRefinement PlaceObjects(const std::vector<Mesh>& objects, const std::vector<RefineView>& views,
+                            const MeshRefineOptions& options, core::Progress* progress) {
+  return Refine(objects, views, options, true, progress);
 }
 
 MeshRefinement RefineTwinMeshes(const std::filesystem::path& twin_dir, const core::Scan& scan,
@@ -389,6 +561,29 @@ MeshRefinement RefineTwinMeshes(const std::filesystem::path& twin_dir, const cor
   }
   MeshRefinement result = RefineMeshes(meshes, views, options, progress);
 
+  // Then the objects, seen from where the frames were corrected to; each mesh moves with its
+  // object, and so does what the spec places with it (cuts, solids, sites, joint).
+  nlohmann::json placement;
+  if (options.object_poses) {
+    std::vector<RefineView> corrected = views;
+    for (size_t i = 0; i < views.size(); ++i)
+      corrected[i].camera_to_base = views[i].camera_to_base * result.frame_corrections[i];
+    const MeshRefinement placed =
+        PlaceObjects(ObjectsOf(spec, files, result.meshes), corrected, options);
+    for (size_t i = 0; i < files.size(); ++i) {
+      for (auto& v : result.meshes[i].vertices) v = placed.object_corrections[i] * v;
+      MoveParts(spec, PartsOfMesh(spec, files[i]), placed.object_corrections[i], true);
+    }
+    result.object_corrections = placed.object_corrections;
+    result.object_centroids = placed.object_centroids;
+    result.object_errors_before = placed.object_errors_before;
+    result.object_errors_after = placed.object_errors_after;
+    result.object_placed = placed.object_placed;
+    placement = {{"depth_error_mm",
+                  {{"before", placed.depth_error_before}, {"after", placed.depth_error_after}}},
+                 {"seconds", placed.seconds}};
+    SaveTwinSpec(twin_dir / "twin.yaml", spec);
+  }
   for (size_t i = 0; i < files.size(); ++i) WriteMesh(twin_dir / files[i], result.meshes[i]);
   ExportOptions export_options;
   export_options.cameras = ReadSceneCameras(twin_dir / "scene.xml");
@@ -418,6 +613,7 @@ MeshRefinement RefineTwinMeshes(const std::filesystem::path& twin_dir, const cor
   json["scan"] = scan.dir.string();
   json["meshes"] = files;
   json["options"] = core::ToJson(options);
+  if (!placement.is_null()) json["placement"] = placement;
   core::WriteFileAtomic(report / "mesh.json", json.dump(2));
   return result;
 }

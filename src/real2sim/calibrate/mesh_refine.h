@@ -49,6 +49,14 @@ RefineView ReduceFrame(const core::PinholeIntrinsics& intrinsics, const core::Po
 MeshRefinement RefineMeshes(const std::vector<Mesh>& meshes, const std::vector<RefineView>& views,
                             const MeshRefineOptions& options, core::Progress* progress = nullptr);
 
+// Places `objects` (base frame, each as it is, no offsets) on the table against `views`, seen
+// from the poses the views give (no frame is corrected): each object's one shift along x and y
+// and one turn about the upright through its centroid (options.object_pose_*; the frames' and
+// shape's options are not used). The result's object_corrections are the motions, its meshes the
+// moved objects. Deterministic. Throws ConfigError when no view shows any of them.
+MeshRefinement PlaceObjects(const std::vector<Mesh>& objects, const std::vector<RefineView>& views,
+                            const MeshRefineOptions& options, core::Progress* progress = nullptr);
+
 // Unit vertex normals: the area-weighted mean of the normals of the triangles around each vertex
 // (by their winding); zero for a vertex no triangle uses.
 std::vector<Eigen::Vector3d> VertexNormals(const Mesh& mesh);

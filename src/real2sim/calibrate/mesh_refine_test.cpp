@@ -1,6 +1,7 @@
 #include "real2sim/calibrate/mesh_refine.h"
 
 #include <gtest/gtest.h>
+#include <open3d/Open3D.h>
 
 #include <cmath>
 
@@ -161,6 +162,87 @@ TEST(MeshRefine, ABumpInTheScanIsPressedBackAndItsColoursCorrected) {
   }
   std::printf("view pose error %.2f -> %.2f mm\n", pose_error(reported), pose_error(corrected));
   EXPECT_LT(pose_error(corrected), 0.4 * pose_error(reported));
+}
+
+// A block with a smaller one on top, off its middle (so that every turn shows), finely
+// triangulated, coloured by height.
+Mesh SteppedBlock() {
+  Mesh block;
+  for (const auto& [centre, size] :
+       {std::pair{Eigen::Vector3d(0.5, 0, 0.07), Eigen::Vector3d(0.08, 0.05, 0.04)},
+        std::pair{Eigen::Vector3d(0.52, 0.01, 0.1), Eigen::Vector3d(0.03, 0.025, 0.02)}}) {
+    auto box = open3d::geometry::TriangleMesh::CreateBox(size.x(), size.y(), size.z());
+    box->Translate(centre - 0.5 * size);
+    box = box->SubdivideMidpoint(3);
+    const int first = static_cast<int>(block.vertices.size());
+    for (const auto& v : box->vertices_) {
+      block.vertices.push_back(v);
+      block.colors.push_back(Eigen::Vector3d(0.3, 0.5, 0.2 + 5 * (v.z() - 0.05)));
+    }
+    for (const auto& t : box->triangles_)
+      block.triangles.emplace_back(first + t[0], first + t[1], first + t[2]);
+  }
+  return block;
+}
+
+Eigen::Vector3d Centroid(const Mesh& mesh) {
+  Eigen::Vector3d c = Eigen::Vector3d::Zero();
+  for (const auto& v : mesh.vertices) c += v;
+  return c / static_cast<double>(mesh.vertices.size());
+}
+
+TEST(MeshRefine, AnObjectTheScanPutAFewMillimetresOffIsMovedBack) {
+  const Mesh truth = SteppedBlock();
+  // The scan: the same block 3.6 mm along the table and turned 3.2 deg about the upright, as a
+  // scan misplaces an object.
+  const Eigen::Vector3d centre = Centroid(truth);
+  const core::Quat turn = core::Yaw(0.056);
+  const core::Pose misplaced{centre + Eigen::Vector3d(0.003, -0.002, 0) - turn * centre, turn};
+  Mesh scan = truth;
+  for (auto& v : scan.vertices) v = misplaced * v;
+  // Beside it, a ball the scan put where it is.
+  Mesh ball = Sphere([](const Eigen::Vector3d&) { return 0.03; }, TrueColour);
+  for (auto& v : ball.vertices) v += Eigen::Vector3d(0.02, -0.1, -0.02);
+  Mesh scene = truth;
+  AppendMesh(scene, ball);
+  std::vector<RefineView> views;
+  for (const auto& eye : {Eigen::Vector3d(0.15, 0.1, 0.35), Eigen::Vector3d(0.2, -0.2, 0.3),
+                          Eigen::Vector3d(0.2, 0.25, 0.25), Eigen::Vector3d(0.3, 0.0, 0.5),
+                          Eigen::Vector3d(0.7, 0.35, 0.3), Eigen::Vector3d(0.75, -0.3, 0.35)})
+    views.push_back(View(scene, eye));
+  // How far a mesh's vertices are from where the block's are, mm (the same vertices).
+  auto error = [&](const Mesh& m) {
+    double e = 0;
+    for (size_t i = 0; i < m.vertices.size(); ++i) e += (m.vertices[i] - truth.vertices[i]).norm();
+    return 1000 * e / m.vertices.size();
+  };
+
+  const MeshRefineOptions options;
+  const MeshRefinement placed = PlaceObjects({scan, ball}, views, options);
+  ASSERT_EQ(placed.object_corrections.size(), 2u);
+  // The correction against the one that undoes the misplacement: at the block, mm and deg.
+  const core::Pose left = placed.object_corrections[0] * misplaced;
+  const double shift_mm = 1000 * (left * centre - centre).norm();
+  const double turn_deg = Eigen::AngleAxisd(left.rotation).angle() * 180 / M_PI;
+  // The offsets alone cannot move it back: they bend the surface where it should slide.
+  const MeshRefinement bent = RefineMeshes({scan, ball}, views, options);
+  std::printf(
+      "vertex error %.2f mm -> %.2f placed (%.2f mm, %.2f deg left), %.2f with the offsets "
+      "alone; depth %.2f -> %.2f mm\n",
+      error(scan), error(placed.meshes[0]), shift_mm, turn_deg, error(bent.meshes[0]),
+      placed.depth_error_before, placed.depth_error_after);
+  EXPECT_GT(error(scan), 3.5);
+  EXPECT_LT(shift_mm, 0.3);
+  EXPECT_LT(turn_deg, 0.2);
+  EXPECT_LT(error(placed.meshes[0]), 0.1 * error(scan));
+  EXPECT_GT(error(bent.meshes[0]), 0.8 * error(scan));
+  EXPECT_TRUE(bent.object_corrections.empty());
+  EXPECT_EQ(placed.offset_max, 0);
+  // The ball explained its pixels already: it keeps its pose, exactly.
+  EXPECT_TRUE(placed.object_placed[0]);
+  EXPECT_FALSE(placed.object_placed[1]);
+  EXPECT_EQ(placed.meshes[1].vertices, ball.vertices);
+  EXPECT_LT(placed.object_errors_after[0], 0.1 * placed.object_errors_before[0]);
 }
 
 TEST(MeshRefine, IsDeterministic) {
