@@ -212,9 +212,8 @@ std::vector<Mesh> ObjectsOf(const TwinSpec& spec, const std::vector<std::string>
   for (size_t i = 0; i < files.size(); ++i) {
     Mesh solids;
     bool all = true;
-    for (const auto& name : PartsOfMesh(spec, files[i])) {
-      const PartSpec& part = *std::find_if(spec.parts.begin(), spec.parts.end(),
-                                           [&](const PartSpec& p) { return p.name == name; });
+    for (const auto& part : spec.parts) {
+      if (part.mesh != files[i]) continue;
       all = all && part.collision == PartSpec::Collision::kSolids;
       for (const auto& box : part.boxes) AppendMesh(solids, BoxMesh(box));
     }
