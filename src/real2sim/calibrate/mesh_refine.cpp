@@ -205,7 +205,7 @@ Agreement Agree(const Packed& p, const torch::Tensor& vertices, const torch::Ten
 // collide as solids and show the object as the mesh does (what the physics holds and inserts:
 // a peg's box, its hole's walls), else the refined mesh. Solids show the object when at least
 // 90% of the mesh's vertices lie within 3 mm of them: a mug's cylinder lacks the handle and the
-// cavity the frames see, and placed by them it moved 1.7 mm the wrong way.
+// cavity the frames see, and placed by them the mug ended farther from the real one.
 std::vector<Mesh> ObjectsOf(const TwinSpec& spec, const std::vector<std::string>& files,
                             const std::vector<Mesh>& refined) {
   std::vector<Mesh> objects;
