@@ -49,6 +49,7 @@ done
 grep -q "Success on reality" "$d/run/eval/report.html"
 grep -q "Physics identified on the robot" "$d/run/eval/report.html"
 grep -q "The scanned meshes" "$d/run/eval/report.html"
+grep -q "Objects placed on the table by the same frames" "$d/run/eval/report.html"
 # sysid measured the proxy arm's lagging servo: the identified twin's has a latency.
 if grep -q "latency: 0$" "$d/run/identified/task.yaml"; then
   echo "the identified twin's servo has no latency" >&2

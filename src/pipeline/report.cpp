@@ -163,6 +163,30 @@ std::filesystem::path WriteReport(const std::filesystem::path& root) {
         mesh["depth_error_mm"]["before"].get<double>(),
         mesh["depth_error_mm"]["after"].get<double>(), mesh["offset_rms_mm"].get<double>());
     h << line;
+    // Each object placed on the table after it (or why not).
+    const auto& objects = mesh.value("object_corrections", nlohmann::json::array());
+    if (!objects.empty() && mesh.contains("meshes")) {
+      h << "<p>Objects placed on the table by the same frames:</p>\n<ul>\n";
+      for (size_t i = 0; i < objects.size() && i < mesh["meshes"].size(); ++i) {
+        const auto& o = objects[i];
+        const std::string name = mesh["meshes"][i].get<std::string>();
+        const double before = o["depth_error_mm"]["before"].get<double>();
+        const double placed = o["depth_error_mm"]["placed"].get<double>();
+        if (o["placed"].get<bool>())
+          std::snprintf(line, sizeof(line),
+                        "<li>%s: moved %.1f mm and turned %.2f deg; its own depth error %.2f -> "
+                        "%.2f mm</li>\n",
+                        name.c_str(), o["translation_mm"].get<double>(),
+                        o["rotation_deg"].get<double>(), before, placed);
+        else
+          std::snprintf(line, sizeof(line),
+                        "<li>%s: kept where the scan put it (placed, its own depth error would "
+                        "have gone %.2f -> %.2f mm)</li>\n",
+                        name.c_str(), before, placed);
+        h << line;
+      }
+      h << "</ul>\n";
+    }
     if (std::filesystem::exists(root / "calibrated/calibration/mesh_00.png"))
       h << "<img style='max-width:96%;image-rendering:pixelated' "
            "src='../calibrated/calibration/mesh_00.png' alt='mesh refinement frame'>"
