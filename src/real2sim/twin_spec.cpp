@@ -49,8 +49,7 @@ std::vector<std::string> PartsOfMesh(const TwinSpec& spec, const std::string& me
   return names;
 }
 
-int MoveParts(TwinSpec& spec, const std::vector<std::string>& parts, const core::Pose& motion,
-              bool cuts) {
+int MoveParts(TwinSpec& spec, const std::vector<std::string>& parts, const core::Pose& motion) {
   auto move_point = [&](std::array<double, 3>& p) {
     const Eigen::Vector3d moved = motion * Eigen::Vector3d(p.data());
     p = {moved.x(), moved.y(), moved.z()};
@@ -67,8 +66,7 @@ int MoveParts(TwinSpec& spec, const std::vector<std::string>& parts, const core:
   int moved = 0;
   for (auto& part : spec.parts) {
     if (!is_moved(part.name)) continue;
-    if (cuts)
-      for (auto& cut : part.cuts) move_box(cut.box);
+    for (auto& cut : part.cuts) move_box(cut.box);
     for (auto& box : part.boxes) move_box(box);
     if (part.com) move_point(*part.com);
     ++moved;

@@ -185,13 +185,11 @@ Mesh PartMesh(const PartSpec& part, const std::filesystem::path& twin_dir);
 // A box's surface as a closed mesh (12 triangles, outward), base frame.
 Mesh BoxMesh(const BoxSpec& box);
 
-// Moves by `motion` (base frame) what the spec places with the parts named: their boxes and
-// centres of mass, the sites on them, the joints whose child they are (the axis turned, the
-// origin moved) and, with `cuts`, their cuts. All of it, as when the object a mesh shows turns
-// out to stand elsewhere (the mesh file moved by the caller); all but the cuts, as when a part's
-// solids are placed anew and its mesh is not. Returns the parts moved.
-int MoveParts(TwinSpec& spec, const std::vector<std::string>& parts, const core::Pose& motion,
-              bool cuts);
+// Moves by `motion` (base frame) what the spec places with the parts named, as when the object a
+// mesh shows turns out to stand elsewhere (the caller moves the mesh file): their cuts, boxes and
+// centres of mass, the sites on them, and the joints whose child they are (the axis turned, the
+// origin moved). Returns the parts moved.
+int MoveParts(TwinSpec& spec, const std::vector<std::string>& parts, const core::Pose& motion);
 // The parts made from the mesh file `mesh` (as the parts name it).
 std::vector<std::string> PartsOfMesh(const TwinSpec& spec, const std::string& mesh);
 

@@ -58,8 +58,8 @@ struct MeshRefineOptions {
   // upright through its centroid, shared by every frame, each frame seen from where it was
   // corrected to. An object is its refined mesh, or the solids its parts collide with where they
   // collide as solids and show it as its mesh does (a peg and its hole, fitted to the scan's
-  // blur; not a mug's cylinder, without its handle). The turn is counted in mm
-  // at the object's rms radius about that line, so that one rate and one prior serve both.
+  // blur; not a mug's cylinder, without its handle). The turn is counted in mm at the object's
+  // rms radius about that line, so that one rate and one prior serve both.
   bool object_poses = true;
   double object_pose_learning_rate = 0.1;  // mm per step
   double object_pose_prior = 0.01;         // x the mean squared correction (mm^2)

@@ -571,7 +571,7 @@ MeshRefinement RefineTwinMeshes(const std::filesystem::path& twin_dir, const cor
         PlaceObjects(ObjectsOf(spec, files, result.meshes), corrected, options);
     for (size_t i = 0; i < files.size(); ++i) {
       for (auto& v : result.meshes[i].vertices) v = placed.object_corrections[i] * v;
-      MoveParts(spec, PartsOfMesh(spec, files[i]), placed.object_corrections[i], true);
+      MoveParts(spec, PartsOfMesh(spec, files[i]), placed.object_corrections[i]);
     }
     result.object_corrections = placed.object_corrections;
     result.object_centroids = placed.object_centroids;
