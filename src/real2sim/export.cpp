@@ -200,17 +200,10 @@ ExportReport ExportMjcf(const TwinSpec& spec, const std::filesystem::path& twin_
       << "      <geom type=\"box\" rgba=\"0.4 0.6 0.9 0\" group=\"3\" mass=\"0\"/>\n"
       << "    </default>\n  </default>\n  <worldbody>\n"
       << "    <light pos=\"0.4 0 1.5\" dir=\"0 0 -1\" directional=\"true\"/>\n";
-  // The table: a slab under the support plane, tilted with it. The parts rest on the plane
-  // where each stands (recipe.cpp); a level slab at the plane's height under the robot's base
-  // was 1.6 mm below them 0.6 m out on a plane tilted 0.17 deg, so they fell onto it, and the
-  // calibration moved the frames, and the meshes with them, down to it.
-  const Plane support = SupportOf(spec);
-  const Eigen::Vector2d centre(options.table_centre[0], options.table_centre[1]);
-  const Eigen::Vector3d up = support.normal.normalized();
-  const Eigen::Vector3d slab = Eigen::Vector3d(centre.x(), centre.y(), support.ZAt(centre)) -
-                               0.5 * options.table_thickness * up;
-  xml << "    <body name=\"table\" pos=\"" << Vec(slab) << "\" quat=\""
-      << Quat(core::Quat::FromTwoVectors(Eigen::Vector3d::UnitZ(), up)) << "\">\n"
+  // The table: a slab under the support plane.
+  const double top = SupportOf(spec).ZAt(Eigen::Vector2d::Zero());
+  xml << "    <body name=\"table\" pos=\"" << options.table_centre[0] << " "
+      << options.table_centre[1] << " " << top - 0.5 * options.table_thickness << "\">\n"
       << "      <geom name=\"table\" type=\"box\" size=\"" << options.table_half[0] << " "
       << options.table_half[1] << " " << 0.5 * options.table_thickness
       << "\" rgba=\"0.72 0.7 0.66 1\" group=\"2\"/>\n    </body>\n";

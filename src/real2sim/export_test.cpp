@@ -276,42 +276,6 @@ TEST(Export, AFittedCylinderStandsStill) {
   EXPECT_LT((at - start).head<2>().norm(), 0.003) << "slid or rolled";
 }
 
-// The table lies on the scan's support plane: tilted as the proxy spatula world's scan found it
-// (0.17 deg, 1.6 mm below the base 0.65 m from the block), the block fitted where the scan shows
-// it, on the plane, stays there. On a level slab at the plane's height under the base it fell
-// 1.5 mm onto it.
-TEST(Export, APartStandsOnATableTiltedWithTheScansSupport) {
-  const auto dir = core::testing::TestDir("export", "tilted");
-  Plane support;
-  support.normal = Eigen::Vector3d(-0.00209, -0.00217, 1).normalized();
-  support.offset = 0.0016 * support.normal.z();
-  const Eigen::Vector2d at(0.65, 0.08);
-  const double floor = support.ZAt(at);
-  ASSERT_GT(floor - support.ZAt(Eigen::Vector2d::Zero()), 0.0014);
-  WriteMesh(dir / "meshes/block.ply",
-            Panels({{{at.x() - 0.05, at.y() - 0.05, floor}, {0.1, 0.1, 0.03}}}));
-  TwinSpec spec = OneSegment("meshes/block.ply");
-  spec.support = {support.normal.x(), support.normal.y(), support.normal.z(), support.offset};
-  sim::TwinRecipe recipe;
-  recipe.parts = {FittedPart("griddle", {0.1, 0.1, 0.03}, "box", 1)};
-  ApplyRecipe(spec, recipe, dir, "test recipe");
-  const sim::ModelPtr m = LoadWithRobot(ExportMjcf(spec, dir).scene);
-  const sim::DataPtr d = sim::MakeData(m.get());
-  mj_forward(m.get(), d.get());
-  const int table = mj_name2id(m.get(), mjOBJ_GEOM, "table");
-  ASSERT_GE(table, 0);
-  const Eigen::Map<const Eigen::Matrix<mjtNum, 3, 3, Eigen::RowMajor>> r(d->geom_xmat + 9 * table);
-  const Eigen::Vector3d top = Eigen::Vector3d(d->geom_xpos + 3 * table) +
-                              r.col(2) * m->geom_size[3 * table + 2];
-  EXPECT_NEAR(support.Distance(top), 0, 1e-9) << "the table's top is on the plane";
-  EXPECT_NEAR(r.col(2).dot(support.normal), 1, 1e-12) << "and tilted with it";
-  const int block = mj_name2id(m.get(), mjOBJ_BODY, "griddle");
-  ASSERT_GE(block, 0);
-  const double start = d->xpos[3 * block + 2];
-  Settle(m, d, "griddle", 0.5);
-  EXPECT_LT(std::abs(d->xpos[3 * block + 2] - start), 0.0003) << "it fell onto the table";
-}
-
 // A spatula the scan shows only the handle of, drawn (recipe shape "drawing") from the task's
 // drawing: the twin has the whole tool and its sites where the real one has them, and with its
 // mass on the steel blade, as drawn, it rests on the blade with the handle up. Spread evenly
