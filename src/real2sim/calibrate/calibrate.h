@@ -53,6 +53,10 @@ struct MeshRefineOptions {
   bool frame_poses = true;
   double pose_learning_rate = 0.15;  // mrad and mm per step
   double pose_prior = 0.01;          // x the mean squared correction (mrad^2, mm^2)
+  // With frame_poses, the table's height too: the twin's table is where the scan's fused surface
+  // put it, 0.4-2 mm below the proxy worlds' tables (the frames' own depth puts them within
+  // 0.6 mm), and a table at the wrong height draws the frames, and the meshes with them, to it.
+  bool table_height = true;
   // Then each object is placed on the table (RefineTwinMeshes, PlaceObjects), since where the
   // scan put it is off by a few mm and degrees: one shift along the table and one turn about the
   // upright through its centroid, shared by every frame, each frame seen from where it was
@@ -84,6 +88,7 @@ struct MeshRefineOptions {
     a("frame_poses", frame_poses);
     a("pose_learning_rate", pose_learning_rate);
     a("pose_prior", pose_prior);
+    a("table_height", table_height);
     a("object_poses", object_poses);
     a("object_pose_learning_rate", object_pose_learning_rate);
     a("object_pose_prior", object_pose_prior);
@@ -224,6 +229,7 @@ struct MeshRefinement {
   double inliers_before = 0, inliers_after = 0;          // share of those pixels within outlier
   double offset_rms = 0, offset_max = 0;                 // mm
   std::vector<core::Pose> frame_corrections;  // per view: true pose = reported * correction
+  double table_lift_mm = 0;  // how far above the twin's table the frames put it (table_height)
   // Per mesh, the motion PlaceObjects found for it (base frame; none from RefineMeshes): the
   // placed vertices are the correction applied to the refined ones.
   std::vector<core::Pose> object_corrections;

@@ -84,11 +84,22 @@ Packed Pack(const std::vector<Mesh>& meshes) {
   return p;
 }
 
-// The refined meshes and what else a view shows, as one mesh to render.
-RasterMesh Scene(const RasterMesh& refined, const RefineView& view) {
+// The vertices with those from `from` on raised by `lift` (m, a scalar tensor).
+torch::Tensor Lifted(const torch::Tensor& vertices, int64_t from, const torch::Tensor& lift) {
+  auto up = torch::zeros_like(vertices);
+  up.slice(0, from).select(1, 2).fill_(1);
+  return vertices + up * lift;
+}
+
+// The refined meshes and what else a view shows, as one mesh to render; with `lift` (m), the
+// table raised by it.
+RasterMesh Scene(const RasterMesh& refined, const RefineView& view,
+                 const torch::Tensor& lift = {}) {
   if (!view.fixed.vertices.defined()) return refined;
   RasterMesh fixed = view.fixed;
   if (!fixed.colors.defined()) fixed.colors = torch::zeros({fixed.vertices.size(0), 3}, kDouble);
+  if (lift.defined() && view.table_from >= 0)
+    fixed.vertices = Lifted(fixed.vertices, view.table_from, lift);
   return JoinMeshes({refined, fixed});
 }
 
@@ -305,6 +316,7 @@ nlohmann::json MeshRefinement::ToJson() const {
                        {"placed", static_cast<bool>(object_placed[i])}});
   }
   return {{"frame_corrections", frames},
+          {"table_lift_mm", table_lift_mm},
           {"object_corrections", objects},
           {"depth_error_mm", {{"before", depth_error_before}, {"after", depth_error_after}}},
           {"rgb_error", {{"before", rgb_error_before}, {"after", rgb_error_after}}},
@@ -313,6 +325,15 @@ nlohmann::json MeshRefinement::ToJson() const {
           {"offset_max_mm", offset_max},
           {"loss", loss},
           {"seconds", seconds}};
+}
+
+std::vector<RefineView> LiftTable(const std::vector<RefineView>& views, double lift) {
+  std::vector<RefineView> lifted = views;
+  torch::NoGradGuard no_grad;
+  for (auto& v : lifted)
+    if (v.fixed.vertices.defined() && v.table_from >= 0)
+      v.fixed.vertices = Lifted(v.fixed.vertices, v.table_from, torch::tensor(lift, kDouble));
+  return lifted;
 }
 
 namespace {
@@ -387,10 +408,12 @@ MeshRefinement Refine(const std::vector<Mesh>& meshes, const std::vector<RefineV
   std::vector<torch::optim::OptimizerParamGroup> groups;
   const double rates[] = {o.learning_rate, o.color_learning_rate, o.pose_learning_rate,
                           o.object_pose_learning_rate};
-  const torch::Tensor tensors[] = {offsets, colors, free, motions};
+  // The table's height (mm) steps with the frames' poses.
+  auto lift = torch::zeros({}, kDouble);
+  if (frame_poses && o.table_height) lift.requires_grad_(true);
+  const std::vector<torch::Tensor> tensors[] = {{offsets}, {colors}, {free, lift}, {motions}};
   for (int g = 0; g < 4; ++g)
-    groups.emplace_back(std::vector<torch::Tensor>{tensors[g]},
-                        std::make_unique<torch::optim::AdamOptions>(rates[g]));
+    groups.emplace_back(tensors[g], std::make_unique<torch::optim::AdamOptions>(rates[g]));
   torch::optim::Adam adam(groups, torch::optim::AdamOptions(o.learning_rate));
 
   const int batch = std::min<int>(o.frames_per_step, static_cast<int>(seen.size()));
@@ -410,7 +433,8 @@ MeshRefinement Refine(const std::vector<Mesh>& meshes, const std::vector<RefineV
       const CameraTensor camera = frame_poses
                                       ? Corrected(view.camera_to_base, corrections[i] * 1e-3)
                                       : ToTensor(view.camera_to_base);
-      const SoftImage image = SoftRasterize(Scene(refined, view), view.intrinsics, camera, raster);
+      const SoftImage image =
+          SoftRasterize(Scene(refined, view, lift * 1e-3), view.intrinsics, camera, raster);
       const auto r = (image.depth - view.depth) * 1000;
       const auto close = r.detach().abs() < o.outlier;
       const auto in = owned[i] & close;
@@ -431,7 +455,7 @@ MeshRefinement Refine(const std::vector<Mesh>& meshes, const std::vector<RefineV
                                        .square()
                                        .mean();
     loss = loss + o.prior * offsets.square().mean();
-    if (frame_poses) loss = loss + o.pose_prior * corrections.square().mean();
+    if (frame_poses) loss = loss + o.pose_prior * (corrections.square().mean() + lift.square());
     if (place) loss = loss + o.object_pose_prior * motions.square().mean();
     loss.backward();
     adam.step();
@@ -461,7 +485,9 @@ MeshRefinement Refine(const std::vector<Mesh>& meshes, const std::vector<RefineV
   }
   const auto vertices = posed(offsets, motions);
   const std::vector<core::Pose> poses = corrected(centred());
-  const Agreement after = Agree(p, vertices, colors, views, poses, owned, o, raster);
+  result.table_lift_mm = lift.item<double>();
+  const Agreement after = Agree(p, vertices, colors, LiftTable(views, result.table_lift_mm * 1e-3),
+                                poses, owned, o, raster);
   for (size_t i = 0; i < views.size(); ++i)
     result.frame_corrections.push_back(views[i].camera_to_base.Inverse() * poses[i]);
   // x -> R (x - c) + c + t, as a pose.
@@ -539,9 +565,8 @@ MeshRefinement RefineTwinMeshes(const std::filesystem::path& twin_dir, const cor
   const mjModel* m = geometry.model();
   const int mount = mj_name2id(m, mjOBJ_BODY, "robot_mount");
   const int table = mj_name2id(m, mjOBJ_GEOM, "table");
-  auto fixed = [&](int g) {
-    return g == table || (mount >= 0 && sim::InSubtree(m, m->geom_bodyid[g], mount));
-  };
+  auto arm = [&](int g) { return mount >= 0 && sim::InSubtree(m, m->geom_bodyid[g], mount); };
+  auto is_table = [&](int g) { return g == table; };
   std::vector<RefineView> views;
   for (const auto& frame : scan.frames) {
     const int factor = std::max(1, frame.intrinsics.width / options.width);
@@ -555,16 +580,21 @@ MeshRefinement RefineTwinMeshes(const std::filesystem::path& twin_dir, const cor
       for (int k = 0; k < 3; ++k) rgb[3 * i + k] = color.bytes[i * color.channels + k];
     RefineView view = ReduceFrame(frame.intrinsics, frame.camera_to_base,
                                   ReadDepthMetres(scan, frame), rgb, factor);
-    view.fixed = geometry.Posed(frame.joint_positions, frame.gripper_width, nullptr, fixed);
+    const RasterMesh shown = geometry.Posed(frame.joint_positions, frame.gripper_width, nullptr, arm);
+    const RasterMesh under =
+        geometry.Posed(frame.joint_positions, frame.gripper_width, nullptr, is_table);
+    view.fixed = JoinMeshes({shown, under});
+    if (under.vertices.size(0) > 0) view.table_from = shown.vertices.size(0);
     views.push_back(std::move(view));
   }
   MeshRefinement result = RefineMeshes(meshes, views, options, progress);
+  const std::vector<RefineView> lifted = LiftTable(views, result.table_lift_mm * 1e-3);
 
   // Then the objects, seen from where the frames were corrected to; each mesh moves with its
   // object, and so does what the spec places with it (cuts, solids, sites, joint).
   nlohmann::json placement;
   if (options.object_poses) {
-    std::vector<RefineView> corrected = views;
+    std::vector<RefineView> corrected = lifted;
     for (size_t i = 0; i < views.size(); ++i)
       corrected[i].camera_to_base = views[i].camera_to_base * result.frame_corrections[i];
     const MeshRefinement placed =
@@ -597,13 +627,14 @@ MeshRefinement RefineTwinMeshes(const std::filesystem::path& twin_dir, const cor
   const Packed before = Pack(meshes), after = Pack(result.meshes);
   for (size_t i = 0; i < views.size(); ++i) {
     const RefineView& v = views[i];
-    auto render = [&](const Packed& p, const core::Pose& pose) {
-      return SoftRasterize(Scene({p.vertices, p.faces, p.colors}, v), v.intrinsics, ToTensor(pose),
-                           sharp);
+    auto render = [&](const Packed& p, const RefineView& shown, const core::Pose& pose) {
+      return SoftRasterize(Scene({p.vertices, p.faces, p.colors}, shown), v.intrinsics,
+                           ToTensor(pose), sharp);
     };
     const core::Image image = BeforeAfterPicture(
-        v.rgb, v.depth, render(before, v.camera_to_base),
-        render(after, v.camera_to_base * result.frame_corrections[i]), options.outlier * 1e-3);
+        v.rgb, v.depth, render(before, v, v.camera_to_base),
+        render(after, lifted[i], v.camera_to_base * result.frame_corrections[i]),
+        options.outlier * 1e-3);
     char name[48];
     std::snprintf(name, sizeof(name), "mesh_%02zu.png", i);
     core::WritePng(report / name, image);

@@ -35,6 +35,7 @@ struct RefineView {
   torch::Tensor depth;        // [H, W] double, m, 0 = no return
   torch::Tensor rgb;          // [H, W, 3] double in [0, 1]
   RasterMesh fixed;           // what else it shows, not refined (base frame; may be undefined)
+  int64_t table_from = -1;    // fixed's vertices from this one on are the table's (-1: none)
 };
 
 // A frame reduced `factor` times in each direction: the median of each block's depth returns
@@ -43,6 +44,9 @@ struct RefineView {
 RefineView ReduceFrame(const core::PinholeIntrinsics& intrinsics, const core::Pose& camera_to_base,
                        const std::vector<float>& depth_m, const std::vector<uint8_t>& rgb,
                        int factor);
+
+// `views` with the table (RefineView::table_from) raised by `lift` m.
+std::vector<RefineView> LiftTable(const std::vector<RefineView>& views, double lift);
 
 // Refines `meshes` (base frame; colours are kept as the start where present, else grey) against
 // `views`. Deterministic. Throws ConfigError when no view shows any of the meshes.

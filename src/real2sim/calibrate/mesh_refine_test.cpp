@@ -90,6 +90,28 @@ RefineView View(const Mesh& truth, const Eigen::Vector3d& eye) {
   return view;
 }
 
+// Six views of `truth` whose reported poses are off by up to 2.4 mm and 4 mrad about their
+// centres, as a hand camera's are, by errors that average to zero over the views (base frame).
+// `truths` gets the true poses.
+std::vector<RefineView> HandCameraViews(const Mesh& truth, std::vector<core::Pose>* truths) {
+  std::vector<RefineView> views;
+  const double size[] = {1, -1, 0.5, -0.5, 0.8, -0.8};
+  int n = 0;
+  for (const auto& eye : {Eigen::Vector3d(0.15, 0.1, 0.35), Eigen::Vector3d(0.2, -0.2, 0.3),
+                          Eigen::Vector3d(0.2, 0.25, 0.25), Eigen::Vector3d(0.3, 0.0, 0.5),
+                          Eigen::Vector3d(0.5, 0.35, 0.3), Eigen::Vector3d(0.5, -0.35, 0.3)}) {
+    views.push_back(View(truth, eye));
+    truths->push_back(views.back().camera_to_base);
+    const double s = size[n++];
+    core::Pose& pose = views.back().camera_to_base;
+    pose.translation += s * Eigen::Vector3d(0.0015, -0.001, 0.0015);
+    pose.rotation =
+        core::Quat(Eigen::AngleAxisd(0.004 * s, Eigen::Vector3d(1, -0.5, 0.5).normalized())) *
+        pose.rotation;
+  }
+  return views;
+}
+
 TEST(MeshRefine, ABumpInTheScanIsPressedBackAndItsColoursCorrected) {
   const Mesh truth = Sphere([](const Eigen::Vector3d&) { return kRadius; }, TrueColour);
   // The scan: a 6 mm bump facing the cameras, and colours washed out by 0.15.
@@ -101,24 +123,8 @@ TEST(MeshRefine, ABumpInTheScanIsPressedBackAndItsColoursCorrected) {
   const Mesh scan = Sphere(bumped, [](const Eigen::Vector3d& d) {
     return (TrueColour(d) + Eigen::Vector3d::Constant(0.15)).cwiseMin(1.0).eval();
   });
-  // Each view's reported pose is off by up to 2.4 mm and 4 mrad about its centre, as a hand
-  // camera's are, by errors that average to zero over the views (base frame).
-  std::vector<RefineView> views;
   std::vector<core::Pose> truths;
-  const double size[] = {1, -1, 0.5, -0.5, 0.8, -0.8};
-  int n = 0;
-  for (const auto& eye : {Eigen::Vector3d(0.15, 0.1, 0.35), Eigen::Vector3d(0.2, -0.2, 0.3),
-                          Eigen::Vector3d(0.2, 0.25, 0.25), Eigen::Vector3d(0.3, 0.0, 0.5),
-                          Eigen::Vector3d(0.5, 0.35, 0.3), Eigen::Vector3d(0.5, -0.35, 0.3)}) {
-    views.push_back(View(truth, eye));
-    truths.push_back(views.back().camera_to_base);
-    const double s = size[n++];
-    core::Pose& pose = views.back().camera_to_base;
-    pose.translation += s * Eigen::Vector3d(0.0015, -0.001, 0.0015);
-    pose.rotation =
-        core::Quat(Eigen::AngleAxisd(0.004 * s, Eigen::Vector3d(1, -0.5, 0.5).normalized())) *
-        pose.rotation;
-  }
+  const std::vector<RefineView> views = HandCameraViews(truth, &truths);
   // How far the views' poses are from the truth: mm at the sphere (0.4 m away).
   auto pose_error = [&](const std::vector<core::Pose>& poses) {
     double e = 0;
@@ -162,6 +168,36 @@ TEST(MeshRefine, ABumpInTheScanIsPressedBackAndItsColoursCorrected) {
   }
   std::printf("view pose error %.2f -> %.2f mm\n", pose_error(reported), pose_error(corrected));
   EXPECT_LT(pose_error(corrected), 0.4 * pose_error(reported));
+}
+
+// The twin's table 2 mm below the one the frames show (a fused scan's table is off by as much):
+// the refinement finds how far, and the sphere on it stays where it is. Held where the twin has
+// it, the table draws the frames' corrections, and the sphere with them.
+TEST(MeshRefine, TheTablesHeightIsTakenFromTheFrames) {
+  const Mesh truth = Sphere([](const Eigen::Vector3d&) { return kRadius; }, TrueColour);
+  std::vector<core::Pose> truths;
+  std::vector<RefineView> views = HandCameraViews(truth, &truths);
+  for (auto& v : views) {
+    v.table_from = 0;  // the fixed mesh is the table alone
+    v.fixed.vertices = v.fixed.vertices - torch::tensor({0.0, 0.0, 0.002}, torch::kFloat64);
+  }
+  auto centre_error_mm = [&](const Mesh& m) {
+    Eigen::Vector3d c = Eigen::Vector3d::Zero();
+    for (const auto& v : m.vertices) c += v;
+    return 1000 * (c / double(m.vertices.size()) - kCentre).norm();
+  };
+  MeshRefineOptions options;
+  const MeshRefinement found = RefineMeshes({truth}, views, options);
+  options.table_height = false;
+  const MeshRefinement held = RefineMeshes({truth}, views, options);
+  std::printf("table found %.2f mm up; the sphere's centre %.2f mm off (%.2f mm with the table "
+              "held); depth error %.2f (%.2f) mm\n",
+              found.table_lift_mm, centre_error_mm(found.meshes[0]),
+              centre_error_mm(held.meshes[0]), found.depth_error_after, held.depth_error_after);
+  EXPECT_NEAR(found.table_lift_mm, 2, 0.3);
+  EXPECT_EQ(held.table_lift_mm, 0);
+  EXPECT_LT(centre_error_mm(found.meshes[0]), 0.5 * centre_error_mm(held.meshes[0]));
+  EXPECT_LT(found.depth_error_after, held.depth_error_after);
 }
 
 // A block with a smaller one on top, off its middle (so that every turn shows), finely
