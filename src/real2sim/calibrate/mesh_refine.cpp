@@ -329,6 +329,7 @@ nlohmann::json MeshRefinement::ToJson() const {
 
 std::vector<RefineView> LiftTable(const std::vector<RefineView>& views, double lift) {
   std::vector<RefineView> lifted = views;
+  if (lift == 0) return lifted;
   torch::NoGradGuard no_grad;
   for (auto& v : lifted)
     if (v.fixed.vertices.defined() && v.table_from >= 0)
@@ -580,7 +581,8 @@ MeshRefinement RefineTwinMeshes(const std::filesystem::path& twin_dir, const cor
       for (int k = 0; k < 3; ++k) rgb[3 * i + k] = color.bytes[i * color.channels + k];
     RefineView view = ReduceFrame(frame.intrinsics, frame.camera_to_base,
                                   ReadDepthMetres(scan, frame), rgb, factor);
-    const RasterMesh shown = geometry.Posed(frame.joint_positions, frame.gripper_width, nullptr, arm);
+    const RasterMesh shown =
+        geometry.Posed(frame.joint_positions, frame.gripper_width, nullptr, arm);
     const RasterMesh under =
         geometry.Posed(frame.joint_positions, frame.gripper_width, nullptr, is_table);
     view.fixed = JoinMeshes({shown, under});
@@ -631,10 +633,10 @@ MeshRefinement RefineTwinMeshes(const std::filesystem::path& twin_dir, const cor
       return SoftRasterize(Scene({p.vertices, p.faces, p.colors}, shown), v.intrinsics,
                            ToTensor(pose), sharp);
     };
-    const core::Image image = BeforeAfterPicture(
-        v.rgb, v.depth, render(before, v, v.camera_to_base),
-        render(after, lifted[i], v.camera_to_base * result.frame_corrections[i]),
-        options.outlier * 1e-3);
+    const core::Image image =
+        BeforeAfterPicture(v.rgb, v.depth, render(before, v, v.camera_to_base),
+                           render(after, lifted[i], v.camera_to_base * result.frame_corrections[i]),
+                           options.outlier * 1e-3);
     char name[48];
     std::snprintf(name, sizeof(name), "mesh_%02zu.png", i);
     core::WritePng(report / name, image);

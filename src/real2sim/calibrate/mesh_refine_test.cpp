@@ -190,10 +190,11 @@ TEST(MeshRefine, TheTablesHeightIsTakenFromTheFrames) {
   const MeshRefinement found = RefineMeshes({truth}, views, options);
   options.table_height = false;
   const MeshRefinement held = RefineMeshes({truth}, views, options);
-  std::printf("table found %.2f mm up; the sphere's centre %.2f mm off (%.2f mm with the table "
-              "held); depth error %.2f (%.2f) mm\n",
-              found.table_lift_mm, centre_error_mm(found.meshes[0]),
-              centre_error_mm(held.meshes[0]), found.depth_error_after, held.depth_error_after);
+  std::printf(
+      "table found %.2f mm up; the sphere's centre %.2f mm off (%.2f mm with the table "
+      "held); depth error %.2f (%.2f) mm\n",
+      found.table_lift_mm, centre_error_mm(found.meshes[0]), centre_error_mm(held.meshes[0]),
+      found.depth_error_after, held.depth_error_after);
   EXPECT_NEAR(found.table_lift_mm, 2, 0.3);
   EXPECT_EQ(held.table_lift_mm, 0);
   EXPECT_LT(centre_error_mm(found.meshes[0]), 0.5 * centre_error_mm(held.meshes[0]));
