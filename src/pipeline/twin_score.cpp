@@ -48,6 +48,8 @@ nlohmann::json TwinScore::ToJson() const {
                  {"completeness_mm", s.completeness_mm},
                  {"position_mm", s.position_mm},
                  {"rotation_deg", s.rotation_deg},
+                 {"shift_mm", s.shift_mm},
+                 {"tilt_deg", s.tilt_deg},
                  {"solid_position_mm", s.solid_position_mm},
                  {"solid_rotation_deg", s.solid_rotation_deg}});
   for (const auto& s : joints)
@@ -156,10 +158,15 @@ TwinScore ScoreTwin(const std::filesystem::path& twin_dir, const std::filesystem
       auto pose_error = [&](const Points& points, double& position_mm, double& rotation_deg) {
         const core::Pose fix = real2sim::AlignPoints(points, full, 0.02);
         const Eigen::Vector3d centre = real2sim::Centroid(points);
-        position_mm = 1000 * (fix * centre - centre).norm();
+        const Eigen::Vector3d shift = 1000 * (fix * centre - centre);
+        position_mm = shift.norm();
         rotation_deg = Eigen::AngleAxisd(fix.rotation).angle() * 180 / M_PI;
+        return std::make_pair(shift, fix.rotation);
       };
-      pose_error(twin_points, o.position_mm, o.rotation_deg);
+      const auto [shift, turn] = pose_error(twin_points, o.position_mm, o.rotation_deg);
+      for (int k = 0; k < 3; ++k) o.shift_mm[k] = shift[k];
+      const Eigen::Vector3d up = turn * Eigen::Vector3d::UnitZ();
+      o.tilt_deg = std::acos(std::clamp(up.z(), -1.0, 1.0)) * 180 / M_PI;
       if (!solids.empty())
         pose_error(
             real2sim::SampleSurface(solids, std::max(100, int(solids.Area() * options.density)), 9),

@@ -39,6 +39,10 @@ struct ObjectScore {
   bool found = false;  // the twin has a part of this name
   double accuracy_mm = 0, completeness_mm = 0, chamfer_mm = 0;
   double position_mm = 0, rotation_deg = 0;
+  // The pose error's parts: the centre's shift (twin -> world, base frame) and how far the turn
+  // tips the twin's up axis (the rest of `rotation_deg` is a turn about the vertical).
+  std::array<double, 3> shift_mm{0, 0, 0};
+  double tilt_deg = 0;
   // The same for what the physics moves, where the part collides as solids fitted to its scan
   // (or drawn): a blurred scan of a 2 cm square peg turns under ICP where its fitted box does
   // not. Zero: the twin collides as its scan.

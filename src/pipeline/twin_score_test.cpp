@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <set>
 
 #include "core/test_support.h"
@@ -66,6 +67,11 @@ TEST_P(TwinFromScans, TheRebuiltTwinMeetsTheTargetsAndTheExpertStillSucceeds) {
   std::printf("%s: %s\n", c.world, score.ToJson().dump().c_str());
   EXPECT_TRUE(score.pass);
   EXPECT_LE(score.mean_chamfer_mm, 5);
+  for (const auto& o : score.objects) {  // the pose error's parts add up to it
+    const auto& s = o.shift_mm;
+    EXPECT_NEAR(std::sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2]), o.position_mm, 1e-9) << o.name;
+    EXPECT_LE(o.tilt_deg, o.rotation_deg + 1e-9) << o.name;
+  }
   if (articulated) {
     ASSERT_EQ(score.joints.size(), 1u);
     EXPECT_EQ(score.joints[0].twin_type, c.type);

@@ -568,6 +568,11 @@ MeshRefinement RefineTwinMeshes(const std::filesystem::path& twin_dir, const cor
   const int table = mj_name2id(m, mjOBJ_GEOM, "table");
   auto arm = [&](int g) { return mount >= 0 && sim::InSubtree(m, m->geom_bodyid[g], mount); };
   auto is_table = [&](int g) { return g == table; };
+  // The table does not move with the arm: posed once, at the first frame's joints.
+  const RasterMesh under =
+      scan.frames.empty() ? RasterMesh{}
+                          : geometry.Posed(scan.frames.front().joint_positions,
+                                           scan.frames.front().gripper_width, nullptr, is_table);
   std::vector<RefineView> views;
   for (const auto& frame : scan.frames) {
     const int factor = std::max(1, frame.intrinsics.width / options.width);
@@ -583,8 +588,6 @@ MeshRefinement RefineTwinMeshes(const std::filesystem::path& twin_dir, const cor
                                   ReadDepthMetres(scan, frame), rgb, factor);
     const RasterMesh shown =
         geometry.Posed(frame.joint_positions, frame.gripper_width, nullptr, arm);
-    const RasterMesh under =
-        geometry.Posed(frame.joint_positions, frame.gripper_width, nullptr, is_table);
     view.fixed = JoinMeshes({shown, under});
     if (under.vertices.size(0) > 0) view.table_from = shown.vertices.size(0);
     views.push_back(std::move(view));
