@@ -342,5 +342,70 @@ TEST(Export, APartOnAnotherNeedsACarrierWithItsOwnSegment) {
       << "nothing stands on a bare block's top";
 }
 
+// A light pancake on a dark griddle, its edge against the griddle's lip, as high as the
+// pancake: the scan fuses the two, and the lip beside the pancake stands on the top as the
+// pancake does. The colours tell them apart: the pancake's cylinder is fitted to the pancake.
+TEST(Export, WhatStandsOnTopInTheCarriersColourStaysWithTheCarrier) {
+  const auto dir = core::testing::TestDir("export", "lip");
+  const Eigen::Vector3d pancake(0.583, 0, 0.026 + 0.0055);
+  const double radius = 0.044;
+  Mesh scan;
+  auto add = [&](const Mesh& part, const Eigen::Vector3d& colour) {
+    const std::size_t first = scan.vertices.size();
+    for (const auto& v : part.vertices) {
+      scan.vertices.push_back(v);
+      scan.colors.push_back(colour);
+    }
+    for (const auto& t : part.triangles)
+      scan.triangles.push_back(t + Eigen::Vector3i::Constant(static_cast<int>(first)));
+  };
+  const Eigen::Vector3d iron(0.09, 0.09, 0.1), batter(0.8, 0.65, 0.35);
+  add(Panels({{{0.55, -0.11, 0}, {0.2, 0.22, 0.026}}}), iron);       // the griddle
+  add(Panels({{{0.626, -0.08, 0.026}, {0.01, 0.16, 0.01}}}), iron);  // its lip, at the pancake
+  // The fusion fills the corners between the pancake's edge and the lip, at the lip's height.
+  add(Panels({{{0.60, -0.035, 0.026}, {0.026, 0.07, 0.0095}}}), iron);
+  auto disc = open3d::geometry::TriangleMesh::CreateCylinder(radius, 0.011, 48, 2);
+  disc->Translate(pancake);
+  add({disc->vertices_, {}, disc->triangles_}, batter);
+  sim::TwinRecipe recipe;
+  recipe.parts = {FittedPart("griddle", {0.2, 0.22, 0.036}, "box", 1),
+                  FittedPart("pancake", {0.08, 0.08, 0.006}, "cylinder", 0.05)};
+  recipe.parts[1].on = "griddle";
+  // The pancake part's mesh (what the twin draws and the calibration moves): how far it
+  // reaches past the pancake's edge towards the lip; and its cylinder's centre.
+  struct Carved {
+    double reach, off, width;
+  };
+  auto carve = [&](const Mesh& mesh) {
+    WriteMesh(dir / "meshes/griddle.ply", mesh);
+    TwinSpec spec = OneSegment("meshes/griddle.ply");
+    ApplyRecipe(spec, recipe, dir, "spatula.yaml");
+    const auto part = std::find_if(spec.parts.begin(), spec.parts.end(),
+                                   [](const PartSpec& p) { return p.name == "pancake"; });
+    EXPECT_NE(part, spec.parts.end());
+    double far = -1;
+    for (const auto& v : ReadMesh(dir / part->mesh).vertices) far = std::max(far, v.x());
+    const BoxSpec& cylinder = part->boxes.at(0);
+    const Carved c{
+        far - (pancake.x() + radius),
+        (Eigen::Vector2d(cylinder.center[0], cylinder.center[1]) - pancake.head<2>()).norm(),
+        cylinder.size[0]};
+    std::printf(
+        "pancake %s colours: mesh %.1f mm past its edge; cylinder %.1f mm off, %.1f mm "
+        "wide (%.1f)\n",
+        mesh.colors.empty() ? "without" : "with", 1000 * c.reach, 1000 * c.off, 1000 * c.width,
+        2000 * radius);
+    return c;
+  };
+  const Mesh blurred = Blurred(scan, 0.0007, 4);
+  const Carved coloured = carve(blurred);
+  EXPECT_LT(coloured.reach, 0.002);
+  EXPECT_LT(coloured.off, 0.0015);
+  EXPECT_NEAR(coloured.width, 2 * radius, 0.003);
+  Mesh grey = blurred;
+  grey.colors.clear();
+  EXPECT_GT(carve(grey).reach, 0.008) << "the lip is not the pancake's by its shape alone";
+}
+
 }  // namespace
 }  // namespace twinforge::real2sim
