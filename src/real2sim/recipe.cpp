@@ -219,14 +219,18 @@ namespace {
 
 enum class OnTop : uint8_t { kNo, kStands, kUnder };
 
+// The mean of triangle `t`'s vertex colours.
+Eigen::Vector3d TriangleColour(const Mesh& mesh, std::size_t t) {
+  const auto& tri = mesh.triangles[t];
+  return (mesh.colors[tri[0]] + mesh.colors[tri[1]] + mesh.colors[tri[2]]) / 3.0;
+}
+
 // The median of each channel of the triangles' mean colours where `label` is `which`.
 Eigen::Vector3d MedianColour(const Mesh& mesh, const std::vector<OnTop>& label, OnTop which) {
   std::vector<double> channel[3];
   for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
     if (label[t] != which) continue;
-    const auto& tri = mesh.triangles[t];
-    const Eigen::Vector3d c =
-        (mesh.colors[tri[0]] + mesh.colors[tri[1]] + mesh.colors[tri[2]]) / 3.0;
+    const Eigen::Vector3d c = TriangleColour(mesh, t);
     for (int k = 0; k < 3; ++k) channel[k].push_back(c[k]);
   }
   Eigen::Vector3d median = Eigen::Vector3d::Zero();
@@ -251,9 +255,7 @@ void KeepCarriersColour(const Mesh& mesh, std::vector<OnTop>& label) {
     return;
   for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
     if (label[t] != OnTop::kStands) continue;
-    const auto& tri = mesh.triangles[t];
-    const Eigen::Vector3d c =
-        (mesh.colors[tri[0]] + mesh.colors[tri[1]] + mesh.colors[tri[2]]) / 3.0;
+    const Eigen::Vector3d c = TriangleColour(mesh, t);
     if ((c - carrier).norm() < (c - standing).norm()) label[t] = OnTop::kNo;
   }
 }
