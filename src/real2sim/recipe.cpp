@@ -8,6 +8,7 @@
 #include "core/config.h"
 #include "core/error.h"
 #include "core/log.h"
+#include "core/measure.h"
 #include "real2sim/drawing.h"
 #include "real2sim/export.h"
 
@@ -225,7 +226,7 @@ Eigen::Vector3d TriangleColour(const Mesh& mesh, std::size_t t) {
   return (mesh.colors[tri[0]] + mesh.colors[tri[1]] + mesh.colors[tri[2]]) / 3.0;
 }
 
-// The median of each channel of the triangles' mean colours where `label` is `which`.
+// The median of each channel of the triangles' mean colours where `label` is `which` (-1: none).
 Eigen::Vector3d MedianColour(const Mesh& mesh, const std::vector<OnTop>& label, OnTop which) {
   std::vector<double> channel[3];
   for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
@@ -233,14 +234,8 @@ Eigen::Vector3d MedianColour(const Mesh& mesh, const std::vector<OnTop>& label, 
     const Eigen::Vector3d c = TriangleColour(mesh, t);
     for (int k = 0; k < 3; ++k) channel[k].push_back(c[k]);
   }
-  Eigen::Vector3d median = Eigen::Vector3d::Zero();
-  for (int k = 0; k < 3; ++k) {
-    if (channel[k].empty()) return Eigen::Vector3d::Constant(-1);
-    auto mid = channel[k].begin() + channel[k].size() / 2;
-    std::nth_element(channel[k].begin(), mid, channel[k].end());
-    median[k] = *mid;
-  }
-  return median;
+  if (channel[0].empty()) return Eigen::Vector3d::Constant(-1);
+  return {core::Median(channel[0]), core::Median(channel[1]), core::Median(channel[2])};
 }
 
 // What stands on the top in the carrier's own colour is the carrier's: a griddle's lip at the
