@@ -17,7 +17,7 @@ namespace twinforge::app {
 namespace {
 
 struct SysidCli {
-  std::string twin, task, out, config;
+  std::string twin, task, out, config, recorded;
   RealityCli reality;
   real2sim::RobotSysidOptions options;
 };
@@ -28,11 +28,17 @@ void RunSysid(SysidCli& o) {
   if (!o.task.empty() && twin_task.name != o.task)
     throw core::ConfigError((twin / "task.yaml").string(), "name",
                             "the twin is of task '" + twin_task.name + "', not '" + o.task + "'");
-  reality::RealityConnection connection(o.reality.Options());
-  spdlog::info("sysid: on {}", connection.address());
   core::Progress progress("sysid", 0, "replays");
-  const core::Json report =
-      pipeline::IdentifyTwin(connection.robot(), twin, o.out, o.options, &progress);
+  core::Json report;
+  if (!o.recorded.empty()) {
+    spdlog::info("sysid: fitting the runs recorded in {}", o.recorded);
+    report = pipeline::IdentifyTwin(pipeline::LoadSysidRecording(o.recorded), twin, o.out,
+                                    o.options, &progress);
+  } else {
+    reality::RealityConnection connection(o.reality.Options());
+    spdlog::info("sysid: on {}", connection.address());
+    report = pipeline::IdentifyTwin(connection.robot(), twin, o.out, o.options, &progress);
+  }
   progress.Finish();
   std::cout << report.dump(2) << "\n";
 }
@@ -52,6 +58,11 @@ void AddSysidCommand(CLI::App& parent, int& exit_code) {
   sysid->add_option("--task", cli->task, "the twin's task (a check: it must be the twin's)");
   sysid->add_option("--out", cli->out, "refined twin directory to write")->required();
   sysid->add_option("--config", cli->config, "sysid options (JSON/YAML)")->check(CLI::ExistingFile);
+  sysid
+      ->add_option("--recorded", cli->recorded,
+                   "fit the runs an earlier sysid recorded (its sysid/trajectories.json) instead "
+                   "of recording on the robot")
+      ->check(CLI::ExistingFile);
   cli->reality.Add(sysid);
   sysid->callback([cli, &exit_code] {
     if (!cli->config.empty())

@@ -31,20 +31,61 @@ real2sim::RobotTrajectory Record(reality::Robot& robot, const std::string& name,
   return t;
 }
 
-core::Json ToJson(const real2sim::RobotTrajectory& t) {
-  core::Json targets = core::Json::array(), q = core::Json::array();
-  for (size_t i = 0; i < t.targets.size(); ++i) {
-    const auto& a = t.targets[i].arm;
-    targets.push_back({{"arm", std::vector<double>(a.data(), a.data() + a.size())},
-                       {"finger", t.targets[i].finger}});
-    q.push_back(std::vector<double>(t.q[i].data(), t.q[i].data() + t.q[i].size()));
+// trajectories.json: one entry per run, as recorded.
+struct RecordedTarget {
+  sim::ArmVector arm = sim::ArmVector::Zero();
+  double finger = 0;
+  template <class A>
+  void Serialize(A& a) {
+    a("arm", arm);
+    a("finger", finger);
   }
-  return {{"name", t.name},
-          {"task_success", t.task_success},
-          {"grip_held", real2sim::GripHeld(t)},
-          {"targets", targets},
-          {"q", q},
-          {"gripper_width", t.gripper_width}};
+};
+
+struct RecordedRun {
+  std::string name, kind;  // kind: "free" or "task"
+  bool task_success = false, grip_held = false;
+  std::vector<RecordedTarget> targets;
+  std::vector<sim::ArmVector> q;
+  std::vector<double> gripper_width;
+  template <class A>
+  void Serialize(A& a) {
+    a("name", name);
+    a("kind", kind);
+    a("task_success", task_success);
+    a("grip_held", grip_held);
+    a("targets", targets);
+    a("q", q);
+    a("gripper_width", gripper_width);
+    a.Require(!targets.empty(), "targets", "at least one joint target");
+    a.Require(q.size() == targets.size(), "q", "one measured arm position per target");
+    a.Require(gripper_width.size() == targets.size(), "gripper_width",
+              "one measured gripper opening per target");
+    // Written before the kind was: the free moves were the run named free_arm.
+    if (kind.empty()) kind = name == "free_arm" ? "free" : "task";
+    a.Require(kind == "free" || kind == "task", "kind", "\"free\" or \"task\"");
+  }
+};
+
+RecordedRun ToRecorded(const real2sim::RobotTrajectory& t, const char* kind) {
+  RecordedRun run{.name = t.name,
+                  .kind = kind,
+                  .task_success = t.task_success,
+                  .grip_held = real2sim::GripHeld(t),
+                  .q = t.q,
+                  .gripper_width = t.gripper_width};
+  for (const auto& target : t.targets) run.targets.push_back({target.arm, target.finger});
+  return run;
+}
+
+real2sim::RobotTrajectory FromRecorded(const RecordedRun& run) {
+  real2sim::RobotTrajectory t{.name = run.name,
+                              .q = run.q,
+                              .gripper_width = run.gripper_width,
+                              .task_success = run.task_success};
+  for (const auto& target : run.targets)
+    t.targets.push_back({.arm = target.arm, .finger = target.finger});
+  return t;
 }
 
 // What the twin spec lets sysid change: each moving joint's damping and dry friction, and the
@@ -76,23 +117,38 @@ void ApplyScene(real2sim::TwinSpec& spec, const std::vector<real2sim::PhysicalPa
   }
 }
 
-}  // namespace
-
-core::Json IdentifyTwin(reality::Robot& robot, const std::filesystem::path& twin,
-                        const std::filesystem::path& out,
-                        const real2sim::RobotSysidOptions& options, core::Progress* progress) {
-  // (A copy into itself never ends.)
+// (A copy into itself never ends.)
+void CheckOutside(const std::filesystem::path& twin, const std::filesystem::path& out) {
   const auto twin_abs = std::filesystem::weakly_canonical(twin);
   const auto out_abs = std::filesystem::weakly_canonical(out);
   if (std::mismatch(twin_abs.begin(), twin_abs.end(), out_abs.begin(), out_abs.end()).first ==
       twin_abs.end())
     throw core::ConfigError(out.string(), "out", "a directory outside the twin " + twin.string());
+}
+
+// The twin's spec, or an empty one for a task's own scene (no twin.yaml).
+real2sim::TwinSpec LoadSpecIfAny(const std::filesystem::path& twin) {
+  return std::filesystem::exists(twin / "twin.yaml") ? real2sim::LoadTwinSpec(twin / "twin.yaml")
+                                                     : real2sim::TwinSpec{};
+}
+
+}  // namespace
+
+SysidRecording LoadSysidRecording(const std::filesystem::path& file) {
+  if (!std::filesystem::exists(file))
+    throw core::IoError("sysid: no recorded runs at " + file.string());
+  const auto runs = core::LoadConfig<std::vector<RecordedRun>>(file);
+  SysidRecording recording;
+  for (const auto& run : runs)
+    (run.kind == "free" ? recording.free_moves : recording.task_runs).push_back(FromRecorded(run));
+  return recording;
+}
+
+core::Json IdentifyTwin(reality::Robot& robot, const std::filesystem::path& twin,
+                        const std::filesystem::path& out,
+                        const real2sim::RobotSysidOptions& options, core::Progress* progress) {
+  CheckOutside(twin, out);
   const sim::TaskSpec twin_task = sim::LoadTaskSpec((twin / "task.yaml").string());
-  // A task's own scene (no twin.yaml) has only the arm's controller to identify.
-  const bool has_spec = std::filesystem::exists(twin / "twin.yaml");
-  real2sim::TwinSpec spec;
-  if (has_spec) spec = real2sim::LoadTwinSpec(twin / "twin.yaml");
-  const auto scene = SceneParameters(spec);
 
   // The experiments, planned in the twin.
   bool expert_success = false;
@@ -111,24 +167,38 @@ core::Json IdentifyTwin(reality::Robot& robot, const std::filesystem::path& twin
       "sysid: recording on the robot: free moves of the arm and gripper ({} steps), the task at "
       "half and a third of full speed ({} and {} steps)",
       free_targets.size(), half_speed.size(), third_speed.size());
-  std::vector<real2sim::RobotTrajectory> free_moves{Record(robot, "free_arm", free_targets)};
-  std::vector<real2sim::RobotTrajectory> task_runs, all_runs;
+  SysidRecording recording;
+  recording.free_moves.push_back(Record(robot, "free_arm", free_targets));
   for (auto [name, targets] :
        {std::pair{"task_half_speed", &half_speed}, std::pair{"task_third_speed", &third_speed}}) {
     auto run = Record(robot, name, *targets);
-    const bool held = real2sim::GripHeld(run);
-    spdlog::info("sysid: {}: the grip {} ({} the goal)", name, held ? "held" : "slipped off",
+    spdlog::info("sysid: {}: the grip {} ({} the goal)", name,
+                 real2sim::GripHeld(run) ? "held" : "slipped off",
                  run.task_success ? "reached" : "did not reach");
-    if (held) task_runs.push_back(run);
-    all_runs.push_back(std::move(run));
+    recording.task_runs.push_back(std::move(run));
   }
+  return IdentifyTwin(recording, twin, out, options, progress);
+}
+
+core::Json IdentifyTwin(const SysidRecording& recording, const std::filesystem::path& twin,
+                        const std::filesystem::path& out,
+                        const real2sim::RobotSysidOptions& options, core::Progress* progress) {
+  CheckOutside(twin, out);
+  const sim::TaskSpec twin_task = sim::LoadTaskSpec((twin / "task.yaml").string());
+  // A task's own scene (no twin.yaml) has only the arm's controller to identify.
+  const bool has_spec = std::filesystem::exists(twin / "twin.yaml");
+  real2sim::TwinSpec spec = LoadSpecIfAny(twin);
+  const auto scene = SceneParameters(spec);
+  std::vector<real2sim::RobotTrajectory> task_runs;
+  for (const auto& run : recording.task_runs)
+    if (real2sim::GripHeld(run)) task_runs.push_back(run);
   if (task_runs.empty() && !scene.empty())
     spdlog::warn(
         "sysid: the grip slipped in every task run: the scene's parameters keep the "
         "twin's values");
 
-  const auto result =
-      real2sim::IdentifyRobotPhysics(twin_task, scene, free_moves, task_runs, options, progress);
+  const auto result = real2sim::IdentifyRobotPhysics(twin_task, scene, recording.free_moves,
+                                                     task_runs, options, progress);
 
   // The refined twin: a copy with the arm's controller and grip force in task.yaml, the scene's
   // values in twin.yaml and scene.xml re-exported.
@@ -150,11 +220,11 @@ core::Json IdentifyTwin(reality::Robot& robot, const std::filesystem::path& twin
   }
 
   core::Json report = real2sim::ToJson(result);
-  core::Json recorded = core::Json::array();
-  for (const auto* list : {&free_moves, &all_runs})
-    for (const auto& t : *list) recorded.push_back(ToJson(t));
+  std::vector<RecordedRun> recorded;
+  for (const auto& t : recording.free_moves) recorded.push_back(ToRecorded(t, "free"));
+  for (const auto& t : recording.task_runs) recorded.push_back(ToRecorded(t, "task"));
   std::filesystem::create_directories(out / "sysid");
-  core::WriteConfigTree(out / "sysid" / "trajectories.json", recorded);
+  core::WriteConfigTree(out / "sysid" / "trajectories.json", core::ToJson(recorded));
   core::WriteConfigTree(out / "sysid" / "sysid.json", report);
   return report;
 }
