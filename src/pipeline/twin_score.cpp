@@ -153,24 +153,31 @@ TwinScore ScoreTwin(const std::filesystem::path& twin_dir, const std::filesystem
       o.completeness_mm = 1000 * Mean(real2sim::SurfaceDistances(visible, twin_mesh));
       o.chamfer_mm = 0.5 * (o.accuracy_mm + o.completeness_mm);
       // The rigid motion that best moves `points` onto the world's: how far it moves their own
-      // centre (its translation alone would count a turn about the robot's base as a shift) and
-      // by what angle it turns them.
-      auto pose_error = [&](const Points& points, double& position_mm, double& rotation_deg) {
+      // centre (its translation alone would count a turn about the robot's base as a shift), by
+      // what angle it turns them, and how far it tilts their up axis.
+      struct PoseError {
+        Eigen::Vector3d shift_mm;
+        double position_mm, rotation_deg, tilt_deg;
+      };
+      auto pose_error = [&](const Points& points) {
         const core::Pose fix = real2sim::AlignPoints(points, full, 0.02);
         const Eigen::Vector3d centre = real2sim::Centroid(points);
         const Eigen::Vector3d shift = 1000 * (fix * centre - centre);
-        position_mm = shift.norm();
-        rotation_deg = Eigen::AngleAxisd(fix.rotation).angle() * 180 / M_PI;
-        return std::make_pair(shift, fix.rotation);
+        const Eigen::Vector3d up = fix.rotation * Eigen::Vector3d::UnitZ();
+        return PoseError{shift, shift.norm(), Eigen::AngleAxisd(fix.rotation).angle() * 180 / M_PI,
+                         std::acos(std::clamp(up.z(), -1.0, 1.0)) * 180 / M_PI};
       };
-      const auto [shift, turn] = pose_error(twin_points, o.position_mm, o.rotation_deg);
-      for (int k = 0; k < 3; ++k) o.shift_mm[k] = shift[k];
-      const Eigen::Vector3d up = turn * Eigen::Vector3d::UnitZ();
-      o.tilt_deg = std::acos(std::clamp(up.z(), -1.0, 1.0)) * 180 / M_PI;
-      if (!solids.empty())
-        pose_error(
-            real2sim::SampleSurface(solids, std::max(100, int(solids.Area() * options.density)), 9),
-            o.solid_position_mm, o.solid_rotation_deg);
+      const PoseError mesh = pose_error(twin_points);
+      o.position_mm = mesh.position_mm;
+      o.rotation_deg = mesh.rotation_deg;
+      o.tilt_deg = mesh.tilt_deg;
+      for (int k = 0; k < 3; ++k) o.shift_mm[k] = mesh.shift_mm[k];
+      if (!solids.empty()) {
+        const PoseError solid = pose_error(real2sim::SampleSurface(
+            solids, std::max(100, int(solids.Area() * options.density)), 9));
+        o.solid_position_mm = solid.position_mm;
+        o.solid_rotation_deg = solid.rotation_deg;
+      }
       chamfers.push_back(o.chamfer_mm);
     }
     score.objects.push_back(o);
