@@ -68,24 +68,26 @@ struct RecordedRun {
 };
 
 RecordedRun ToRecorded(const real2sim::RobotTrajectory& t, const char* kind) {
-  RecordedRun run{.name = t.name,
-                  .kind = kind,
-                  .task_success = t.task_success,
-                  .grip_held = real2sim::GripHeld(t),
-                  .q = t.q,
-                  .gripper_width = t.gripper_width};
-  for (const auto& target : t.targets) run.targets.push_back({target.arm, target.finger});
-  return run;
+  std::vector<RecordedTarget> targets;
+  for (const auto& target : t.targets) targets.push_back({target.arm, target.finger});
+  return {.name = t.name,
+          .kind = kind,
+          .task_success = t.task_success,
+          .grip_held = real2sim::GripHeld(t),
+          .targets = std::move(targets),
+          .q = t.q,
+          .gripper_width = t.gripper_width};
 }
 
 real2sim::RobotTrajectory FromRecorded(const RecordedRun& run) {
-  real2sim::RobotTrajectory t{.name = run.name,
-                              .q = run.q,
-                              .gripper_width = run.gripper_width,
-                              .task_success = run.task_success};
+  std::vector<sim::JointTargets> targets;
   for (const auto& target : run.targets)
-    t.targets.push_back({.arm = target.arm, .finger = target.finger});
-  return t;
+    targets.push_back({.arm = target.arm, .finger = target.finger});
+  return {.name = run.name,
+          .targets = std::move(targets),
+          .q = run.q,
+          .gripper_width = run.gripper_width,
+          .task_success = run.task_success};
 }
 
 // What the twin spec lets sysid change: each moving joint's damping and dry friction, and the
@@ -124,12 +126,6 @@ void CheckOutside(const std::filesystem::path& twin, const std::filesystem::path
   if (std::mismatch(twin_abs.begin(), twin_abs.end(), out_abs.begin(), out_abs.end()).first ==
       twin_abs.end())
     throw core::ConfigError(out.string(), "out", "a directory outside the twin " + twin.string());
-}
-
-// The twin's spec, or an empty one for a task's own scene (no twin.yaml).
-real2sim::TwinSpec LoadSpecIfAny(const std::filesystem::path& twin) {
-  return std::filesystem::exists(twin / "twin.yaml") ? real2sim::LoadTwinSpec(twin / "twin.yaml")
-                                                     : real2sim::TwinSpec{};
 }
 
 }  // namespace
@@ -187,7 +183,8 @@ core::Json IdentifyTwin(const SysidRecording& recording, const std::filesystem::
   const sim::TaskSpec twin_task = sim::LoadTaskSpec((twin / "task.yaml").string());
   // A task's own scene (no twin.yaml) has only the arm's controller to identify.
   const bool has_spec = std::filesystem::exists(twin / "twin.yaml");
-  real2sim::TwinSpec spec = LoadSpecIfAny(twin);
+  real2sim::TwinSpec spec;
+  if (has_spec) spec = real2sim::LoadTwinSpec(twin / "twin.yaml");
   const auto scene = SceneParameters(spec);
   std::vector<real2sim::RobotTrajectory> task_runs;
   for (const auto& run : recording.task_runs)
