@@ -14,6 +14,9 @@ namespace twinforge::pipeline {
 
 namespace {
 
+// Control periods the lift runs hold the object still at the end (1.5 s).
+constexpr int kLiftHold = 15;
+
 // Sends `targets` from the task's level-0 start and reads the arm after each control period.
 real2sim::RobotTrajectory Record(reality::Robot& robot, const std::string& name,
                                  std::vector<sim::JointTargets> targets) {
@@ -45,6 +48,7 @@ struct RecordedTarget {
 struct RecordedRun {
   std::string name, kind;  // kind: "free" or "task"
   bool task_success = false, grip_held = false;
+  long fit_from = 0;  // the first step fitted (a lift run: where the hold begins)
   std::vector<RecordedTarget> targets;
   std::vector<sim::ArmVector> q;
   std::vector<double> gripper_width;
@@ -54,6 +58,7 @@ struct RecordedRun {
     a("kind", kind);
     a("task_success", task_success);
     a("grip_held", grip_held);
+    a("fit_from", fit_from);
     a("targets", targets);
     a("q", q);
     a("gripper_width", gripper_width);
@@ -61,6 +66,8 @@ struct RecordedRun {
     a.Require(q.size() == targets.size(), "q", "one measured arm position per target");
     a.Require(gripper_width.size() == targets.size(), "gripper_width",
               "one measured gripper opening per target");
+    a.Require(fit_from >= 0 && fit_from < static_cast<long>(targets.size()), "fit_from",
+              "a step of the run");
     // Written before the kind was: the free moves were the run named free_arm.
     if (kind.empty()) kind = name == "free_arm" ? "free" : "task";
     a.Require(kind == "free" || kind == "task", "kind", "\"free\" or \"task\"");
@@ -74,6 +81,7 @@ RecordedRun ToRecorded(const real2sim::RobotTrajectory& t, const char* kind) {
           .kind = kind,
           .task_success = t.task_success,
           .grip_held = real2sim::GripHeld(t),
+          .fit_from = t.fit_from,
           .targets = std::move(targets),
           .q = t.q,
           .gripper_width = t.gripper_width};
@@ -87,12 +95,21 @@ real2sim::RobotTrajectory FromRecorded(const RecordedRun& run) {
           .targets = std::move(targets),
           .q = run.q,
           .gripper_width = run.gripper_width,
-          .task_success = run.task_success};
+          .task_success = run.task_success,
+          .fit_from = run.fit_from};
+}
+
+bool HasMovingJoints(const real2sim::TwinSpec& spec) {
+  return std::any_of(spec.joints.begin(), spec.joints.end(), [](const real2sim::JointSpec& j) {
+    return j.type != real2sim::JointType::kFixed;
+  });
 }
 
 // What the twin spec lets sysid change: each moving joint's damping and dry friction, and the
-// mass of the part it moves.
-std::vector<real2sim::PhysicalParameter> SceneParameters(const real2sim::TwinSpec& spec) {
+// mass of the part it moves. A scene without moving joints: the mass of each part the expert
+// carries (a site on it is carried), which the lift runs weigh.
+std::vector<real2sim::PhysicalParameter> SceneParameters(const real2sim::TwinSpec& spec,
+                                                         const sim::TaskSpec& task) {
   using Kind = real2sim::PhysicalParameter::Kind;
   std::vector<real2sim::PhysicalParameter> out;
   for (const auto& j : spec.joints) {
@@ -101,6 +118,15 @@ std::vector<real2sim::PhysicalParameter> SceneParameters(const real2sim::TwinSpe
     out.push_back({Kind::kJointFriction, j.name, 0.05, 200});
     out.push_back({Kind::kBodyMass, j.child, 0.05, 50});
   }
+  if (HasMovingJoints(spec)) return out;
+  for (const auto& step : task.expert.steps)
+    for (const auto& site : spec.sites) {
+      if (site.name != step.carry) continue;
+      const bool listed = std::any_of(out.begin(), out.end(), [&](const auto& p) {
+        return p.name == site.part;
+      });
+      if (!listed) out.push_back({Kind::kBodyMass, site.part, 0.005, 20});
+    }
   return out;
 }
 
@@ -150,24 +176,38 @@ core::Json IdentifyTwin(reality::Robot& robot, const std::filesystem::path& twin
   bool expert_success = false;
   const auto free_targets = real2sim::FreeArmTargets(twin_task);
   // At half and a third of the speed the expert planned at: at full speed the fingers chatter
-  // on a handle, and the runs' error is too rough to fit (docs/calibrate.md, stop 57).
-  const auto half_speed = real2sim::ExpertTargets(twin_task, 2, &expert_success);
-  const auto third_speed = real2sim::ExpertTargets(twin_task, 3);
-  if (!expert_success)
+  // on a handle, and the runs' error is too rough to fit (docs/calibrate.md, stop 57). A scene
+  // without moving joints: the expert up to where it has lifted what it carries, then held
+  // still (the whole script would put the scan's contacts, a peg in its hole, in the runs).
+  const bool articulated =
+      !std::filesystem::exists(twin / "twin.yaml") ||
+      HasMovingJoints(real2sim::LoadTwinSpec(twin / "twin.yaml"));
+  const auto plan = [&](int repeat, bool* success) {
+    return articulated ? real2sim::ExpertTargets(twin_task, repeat, success)
+                       : real2sim::LiftTargets(twin_task, repeat, kLiftHold);
+  };
+  const auto half_speed = plan(2, &expert_success);
+  const auto third_speed = plan(3, nullptr);
+  if (articulated && !expert_success)
     spdlog::warn(
         "sysid: the scripted expert does not reach the goal in the twin; the task runs "
         "may not move the scene");
 
   // ... run on the robot.
   spdlog::info(
-      "sysid: recording on the robot: free moves of the arm and gripper ({} steps), the task at "
+      "sysid: recording on the robot: free moves of the arm and gripper ({} steps), the task{} at "
       "half and a third of full speed ({} and {} steps)",
-      free_targets.size(), half_speed.size(), third_speed.size());
+      free_targets.size(), articulated ? "" : " up to the lift, then held", half_speed.size(),
+      third_speed.size());
   SysidRecording recording;
   recording.free_moves.push_back(Record(robot, "free_arm", free_targets));
   for (auto [name, targets] :
        {std::pair{"task_half_speed", &half_speed}, std::pair{"task_third_speed", &third_speed}}) {
+    if (targets->empty()) continue;  // nothing carried: no lift to weigh
     auto run = Record(robot, name, *targets);
+    // A lift run is fitted where the object hangs still: the grasp's contacts hold the scan's
+    // errors, and pressed the arm 0.04 deg off on the proxy peg (docs/calibrate.md, stop 65).
+    if (!articulated) run.fit_from = static_cast<long>(targets->size()) - kLiftHold;
     spdlog::info("sysid: {}: the grip {} ({} the goal)", name,
                  real2sim::GripHeld(run) ? "held" : "slipped off",
                  run.task_success ? "reached" : "did not reach");
@@ -185,7 +225,7 @@ core::Json IdentifyTwin(const SysidRecording& recording, const std::filesystem::
   const bool has_spec = std::filesystem::exists(twin / "twin.yaml");
   real2sim::TwinSpec spec;
   if (has_spec) spec = real2sim::LoadTwinSpec(twin / "twin.yaml");
-  const auto scene = SceneParameters(spec);
+  const auto scene = SceneParameters(spec, twin_task);
   std::vector<real2sim::RobotTrajectory> task_runs;
   for (const auto& run : recording.task_runs)
     if (real2sim::GripHeld(run)) task_runs.push_back(run);

@@ -89,7 +89,12 @@ std::vector<sim::JointTargets> FreeArmTargets(const sim::TaskSpec& twin, double 
   return out;
 }
 
-std::vector<sim::JointTargets> ExpertTargets(const sim::TaskSpec& twin, int repeat, bool* success) {
+namespace {
+// The scripted expert's joint targets in the twin from the level-0 start, planned at full speed,
+// each sent `repeat` times, until the script ends or (`last_step` 0 or more) that step is done.
+// `success`: the goal was reached.
+std::vector<sim::JointTargets> ExpertPlan(const sim::TaskSpec& twin, int repeat, int last_step,
+                                          bool* success) {
   if (repeat < 1) throw core::ConfigError("sysid", "repeat", "a positive repeat count");
   auto task = std::make_shared<const sim::Task>(twin);
   sim::Env env(task);
@@ -100,6 +105,7 @@ std::vector<sim::JointTargets> ExpertTargets(const sim::TaskSpec& twin, int repe
   std::vector<sim::JointTargets> out;
   bool reached = false;
   for (int step = 0; step < task->spec().horizon && !expert.finished(); ++step) {
+    if (last_step >= 0 && expert.current_step() > last_step) break;
     const sim::Action action = expert.Act(env, rng);
     const sim::JointTargets targets = sim::ActionToJointTargets(
         env.kinematics(), env.ArmPositions(), action, task->spec().control.limits, env.gripper());
@@ -107,6 +113,21 @@ std::vector<sim::JointTargets> ExpertTargets(const sim::TaskSpec& twin, int repe
     reached = env.StepTargets(targets).success || reached;
   }
   if (success) *success = reached;
+  return out;
+}
+}  // namespace
+
+std::vector<sim::JointTargets> ExpertTargets(const sim::TaskSpec& twin, int repeat, bool* success) {
+  return ExpertPlan(twin, repeat, -1, success);
+}
+
+std::vector<sim::JointTargets> LiftTargets(const sim::TaskSpec& twin, int repeat, int hold) {
+  const auto& steps = twin.expert.steps;
+  const auto lift = std::find_if(steps.begin(), steps.end(),
+                                 [](const sim::ExpertStep& s) { return !s.carry.empty(); });
+  if (lift == steps.end()) return {};
+  auto out = ExpertPlan(twin, repeat, static_cast<int>(lift - steps.begin()), nullptr);
+  if (!out.empty()) out.insert(out.end(), hold, out.back());
   return out;
 }
 
@@ -182,14 +203,16 @@ Eigen::VectorXd TwinReplay::Compare(const RobotPhysics& physics,
       throw core::ConfigError(
           "sysid", t.name,
           gripper ? "one measured gripper opening per target" : "one measured position per target");
-    n += per_step * static_cast<long>(t.targets.size());
+    if (t.fit_from < 0 || t.fit_from >= static_cast<long>(t.targets.size()))
+      throw core::ConfigError("sysid", t.name, "fit_from a step of the run");
+    n += per_step * (static_cast<long>(t.targets.size()) - t.fit_from);
   }
   Eigen::VectorXd r(n);
   long at = 0;
   std::vector<double> width;
   for (const auto& t : trajectories) {
     const auto q = Run(physics, scene, t.targets, &width);
-    for (size_t i = 0; i < q.size(); ++i, at += per_step) {
+    for (size_t i = t.fit_from; i < q.size(); ++i, at += per_step) {
       if (gripper)
         r[at] = width[i] - t.gripper_width[i];
       else
@@ -419,12 +442,33 @@ RobotSysidResult IdentifyRobotPhysics(const sim::TaskSpec& twin,
           "sysid: the scene's fit leaves the task runs {:.3g} deg RMS off (more than {:.3g}): the "
           "twin's values are kept",
           std::sqrt(fit.error.empty() ? NAN : fit.error.back()) * 180 / M_PI, allowed * 180 / M_PI);
+    // The controller's own misfit could move a value too: were the free moves' misfit all along
+    // what halving the value changes in the runs (`effect`, RMS), the value would be off by half
+    // their ratio. A lift's hold tells a peg's mass by 0.0008 deg, and with a controller fitted
+    // only to 0.022 deg a peg of 80 g was taken as 184 g (docs/calibrate.md, stop 65).
+    const Eigen::VectorXd at_fit = replay.Residuals(with_scene(fit.values, "scene"), scene, task_runs);
     for (size_t i = 0; i < scene.size(); ++i) {
-      bool identified =
-          r.scene_explains_runs && fit.relative_error[i] <= options.max_relative_error;
+      std::vector<double> halved = fit.values;
+      halved[i] *= 0.5;
+      const double effect = std::sqrt(MeanSquare(
+          replay.Residuals(with_scene(halved, "scene"), scene, task_runs) - at_fit));
+      r.scene_controller_bound.push_back(free_rms == 0 ? 0.0
+                                         : effect > 0  ? 0.5 * free_rms / effect
+                                                       : HUGE_VAL);
+    }
+    r.replays += static_cast<int>(scene.size() + 1) * static_cast<int>(task_runs.size());
+    for (size_t i = 0; i < scene.size(); ++i) {
+      bool identified = r.scene_explains_runs &&
+                        fit.relative_error[i] <= options.max_relative_error &&
+                        r.scene_controller_bound[i] <= options.max_relative_error;
       for (const auto& alone : r.scene_per_run)
         identified = identified && std::abs(alone[i] - fit.values[i]) <=
                                        options.max_relative_error * std::abs(fit.values[i]);
+      if (r.scene_explains_runs && r.scene_controller_bound[i] > options.max_relative_error)
+        spdlog::warn(
+            "sysid: {}: the free moves' misfit ({:.3g} deg) could move it by {:.0f}%: the twin's "
+            "value is kept",
+            scene[i].name, free_rms * 180 / M_PI, 100 * r.scene_controller_bound[i]);
       r.scene_identified.push_back(identified);
       if (identified) physics.scene[i] = fit.values[i];
     }
@@ -461,6 +505,7 @@ core::Json ToJson(const RobotSysidResult& r) {
           {"grip_identified", r.grip_identified},
           {"scene_fitted", r.scene_fitted},
           {"scene_relative_error", r.scene_relative_error},
+          {"scene_controller_bound", r.scene_controller_bound},
           {"scene_per_run", r.scene_per_run},
           {"scene_explains_runs", r.scene_explains_runs},
           {"scene_identified", r.scene_identified},

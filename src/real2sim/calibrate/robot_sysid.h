@@ -33,6 +33,10 @@ struct RobotTrajectory {
   std::vector<sim::ArmVector> q;           // measured after each
   std::vector<double> gripper_width;       // measured after each (m)
   bool task_success = false;               // the task's goal was reached (robot's answer)
+  // The first step compared with the twin's (the earlier ones are replayed, not compared): a
+  // lift run is fitted where the object hangs still in the hand, after the grasp, whose contacts
+  // hold the scan's errors (docs/calibrate.md, stop 65).
+  long fit_from = 0;
 };
 
 // Whether the gripper still held something (> 5 mm between the fingers) at the last step it was
@@ -59,6 +63,10 @@ std::vector<sim::JointTargets> FreeArmTargets(const sim::TaskSpec& twin, double 
 // expert reached the goal in the twin.
 std::vector<sim::JointTargets> ExpertTargets(const sim::TaskSpec& twin, int repeat,
                                              bool* success = nullptr);
+// The same up to the end of the script's first step that carries a site (the held object lifted
+// clear), then the last target held for `hold` control periods: with the arm still, how far it
+// sags under what it holds tells that object's mass. Empty if no step carries.
+std::vector<sim::JointTargets> LiftTargets(const sim::TaskSpec& twin, int repeat, int hold);
 
 // The twin, replaying joint targets from the level-0 start with given physics.
 class TwinReplay {
@@ -70,7 +78,8 @@ class TwinReplay {
                                   const std::vector<PhysicalParameter>& scene,
                                   const std::vector<sim::JointTargets>& targets,
                                   std::vector<double>* gripper_width = nullptr);
-  // The twin's joint positions minus the measured ones, every step and joint of every trajectory.
+  // The twin's joint positions minus the measured ones, every step (from each one's `fit_from`)
+  // and joint of every trajectory.
   Eigen::VectorXd Residuals(const RobotPhysics& physics,
                             const std::vector<PhysicalParameter>& scene,
                             const std::vector<RobotTrajectory>& trajectories);
@@ -142,6 +151,10 @@ struct RobotSysidResult {
   // interpolation, latency, kp, kd, friction, joint damping
   std::vector<double> controller_relative_error;
   std::vector<double> scene_fitted, scene_relative_error;
+  // How far the controller's misfit (the free moves' RMS) could move each value, relative: half
+  // that RMS over what halving the value changes in the task runs. A value whose bound exceeds
+  // `max_relative_error` is not identified: the arm is not known well enough to weigh it.
+  std::vector<double> scene_controller_bound;
   // With two task runs or more: each run's own fit (one row per run). A value the rows
   // disagree on by more than `max_relative_error` of the joint fit is not identified.
   std::vector<std::vector<double>> scene_per_run;

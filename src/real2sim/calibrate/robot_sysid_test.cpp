@@ -157,6 +157,70 @@ TEST(RobotSysid, AFitThatLeavesTheRunsUnexplainedIsNotTaken) {
   }
 }
 
+// A free object has no joint whose lag tells its physics, but an arm that holds it still sags
+// under its weight. The peg task's expert is run until the peg is lifted clear of the table,
+// then held; "the robot" has the proxy's heavier peg (80 g against the twin's 60). On the proxy
+// the twin's arm went 0.04 deg off the robot's while the fingers closed on the scanned peg, 80
+// times what the mass bends it by; the hold alone matched it (docs/calibrate.md, stop 65). Here
+// the grasp's steps are put that far off by hand.
+TEST(RobotSysid, RecoversTheMassOfWhatTheArmLiftsFromTheHold) {
+  Synthetic s;
+  s.twin = sim::LoadTaskSpec("peg_insertion");
+  s.KnowTheController();
+  s.scene = {{PhysicalParameter::Kind::kBodyMass, "peg", 0.005, 5}};
+  s.truth.scene = {0.08};
+  ASSERT_NEAR(TwinReplay(s.twin).NominalScene(s.scene)[0], 0.06, 1e-9);
+  constexpr int kHold = 10;
+  const auto half = LiftTargets(s.twin, 2, kHold);
+  // Up to the lift (steps 0-3: over the peg, down, close, up), then held.
+  ASSERT_GT(half.size(), 20u);
+  EXPECT_EQ(half.back().arm, half[half.size() - kHold - 1].arm);
+  std::vector<RobotTrajectory> runs{s.Record("half_speed", half),
+                                    s.Record("third_speed", LiftTargets(s.twin, 3, kHold))};
+  for (auto& run : runs) {
+    EXPECT_TRUE(GripHeld(run)) << run.name;  // the peg in the hand
+    run.fit_from = static_cast<long>(run.targets.size()) - kHold;
+    for (long i = 0; i < run.fit_from; ++i)
+      if (run.targets[i].finger == 0) run.q[i][1] += 0.04 * M_PI / 180;  // the grasp, off
+  }
+  RobotSysidOptions options;
+  options.scene_search.iterations = 0;  // one value, near: Levenberg-Marquardt alone
+  const RobotSysidResult r = IdentifyRobotPhysics(s.twin, s.scene, {}, runs, options);
+  std::printf("the hold: %.3g deg RMS off with the twin's peg, %.3g after the fit; %.4f kg\n",
+              std::sqrt(r.task_error_before) * 180 / M_PI,
+              std::sqrt(r.task_error_after) * 180 / M_PI, r.scene_fitted[0]);
+  EXPECT_TRUE(r.scene_explains_runs);
+  ASSERT_EQ(r.scene_identified, std::vector<bool>({true}));
+  EXPECT_NEAR(r.identified.scene[0], 0.08, 0.01 * 0.08);
+
+  EXPECT_LT(r.scene_controller_bound[0], 1e-9);  // the controller given: no misfit
+
+  // With the controller fitted to free moves, but roughly (one iteration), the hold is fitted as
+  // well as the guard asks, yet the arm is not known well enough to weigh 80 g: the misfit
+  // could move the mass by more than 15%. (On the proxy such a fit took the peg as 184 g.)
+  const sim::TaskSpec rough = sim::LoadTaskSpec("peg_insertion");  // the model's controller
+  RobotSysidOptions quick = options;
+  quick.controller.iterations = 1;
+  const RobotSysidResult guess = IdentifyRobotPhysics(
+      rough, s.scene, {s.Record("free", FreeArmTargets(rough))}, runs, quick);
+  std::printf("a rough controller: free moves %.3g deg RMS off; %.4f kg, bound %.0f%%\n",
+              std::sqrt(guess.free_error_after) * 180 / M_PI, guess.scene_fitted[0],
+              100 * guess.scene_controller_bound[0]);
+  EXPECT_GT(guess.scene_controller_bound[0], 0.15);
+  EXPECT_EQ(guess.scene_identified, std::vector<bool>({false}));
+
+  // Fitted from the first step, the grasp's error is what the fit sees.
+  for (auto& run : runs) run.fit_from = 0;
+  const RobotSysidResult whole = IdentifyRobotPhysics(s.twin, s.scene, {}, runs, options);
+  std::printf("the whole run: %.3g deg RMS off after the fit; %.4f kg\n",
+              std::sqrt(whole.task_error_after) * 180 / M_PI, whole.scene_fitted[0]);
+  EXPECT_FALSE(whole.scene_explains_runs);
+  EXPECT_EQ(whole.identified.scene, whole.start.scene);
+
+  // A script that never carries has nothing to lift.
+  EXPECT_TRUE(LiftTargets(sim::LoadTaskSpec("open_drawer"), 2, kHold).empty());
+}
+
 TEST(RobotSysid, AGripIsHeldOnlyIfTheFingersStayApart) {
   RobotTrajectory t;
   for (double finger : {0.04, 0.0, 0.0, 0.04}) {
