@@ -122,9 +122,8 @@ std::vector<real2sim::PhysicalParameter> SceneParameters(const real2sim::TwinSpe
   for (const auto& step : task.expert.steps)
     for (const auto& site : spec.sites) {
       if (site.name != step.carry) continue;
-      const bool listed = std::any_of(out.begin(), out.end(), [&](const auto& p) {
-        return p.name == site.part;
-      });
+      const bool listed =
+          std::any_of(out.begin(), out.end(), [&](const auto& p) { return p.name == site.part; });
       if (!listed) out.push_back({Kind::kBodyMass, site.part, 0.005, 20});
     }
   return out;
@@ -179,9 +178,8 @@ core::Json IdentifyTwin(reality::Robot& robot, const std::filesystem::path& twin
   // on a handle, and the runs' error is too rough to fit (docs/calibrate.md, stop 57). A scene
   // without moving joints: the expert up to where it has lifted what it carries, then held
   // still (the whole script would put the scan's contacts, a peg in its hole, in the runs).
-  const bool articulated =
-      !std::filesystem::exists(twin / "twin.yaml") ||
-      HasMovingJoints(real2sim::LoadTwinSpec(twin / "twin.yaml"));
+  const bool articulated = !std::filesystem::exists(twin / "twin.yaml") ||
+                           HasMovingJoints(real2sim::LoadTwinSpec(twin / "twin.yaml"));
   const auto plan = [&](int repeat, bool* success) {
     return articulated ? real2sim::ExpertTargets(twin_task, repeat, success)
                        : real2sim::LiftTargets(twin_task, repeat, kLiftHold);

@@ -446,12 +446,13 @@ RobotSysidResult IdentifyRobotPhysics(const sim::TaskSpec& twin,
     // what halving the value changes in the runs (`effect`, RMS), the value would be off by half
     // their ratio. A lift's hold tells a peg's mass by 0.0008 deg, and with a controller fitted
     // only to 0.022 deg a peg of 80 g was taken as 184 g (docs/calibrate.md, stop 65).
-    const Eigen::VectorXd at_fit = replay.Residuals(with_scene(fit.values, "scene"), scene, task_runs);
+    const Eigen::VectorXd at_fit =
+        replay.Residuals(with_scene(fit.values, "scene"), scene, task_runs);
     for (size_t i = 0; i < scene.size(); ++i) {
       std::vector<double> halved = fit.values;
       halved[i] *= 0.5;
-      const double effect = std::sqrt(MeanSquare(
-          replay.Residuals(with_scene(halved, "scene"), scene, task_runs) - at_fit));
+      const double effect = std::sqrt(
+          MeanSquare(replay.Residuals(with_scene(halved, "scene"), scene, task_runs) - at_fit));
       r.scene_controller_bound.push_back(free_rms == 0 ? 0.0
                                          : effect > 0  ? 0.5 * free_rms / effect
                                                        : HUGE_VAL);

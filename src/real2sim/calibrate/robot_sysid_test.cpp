@@ -145,9 +145,10 @@ TEST(RobotSysid, AFitThatLeavesTheRunsUnexplainedIsNotTaken) {
     options.scene_search.iterations = 0;
     const RobotSysidResult r = IdentifyRobotPhysics(s.twin, s.scene, {}, runs, options);
     const double rms_deg = std::sqrt(r.scene_curve.back()) * 180 / M_PI;
-    std::printf("grip %.0f N: the fit leaves the run %.3g deg RMS off, at damping %.2f, friction "
-                "%.2f, mass %.2f kg\n",
-                grip, rms_deg, r.scene_fitted[0], r.scene_fitted[1], r.scene_fitted[2]);
+    std::printf(
+        "grip %.0f N: the fit leaves the run %.3g deg RMS off, at damping %.2f, friction "
+        "%.2f, mass %.2f kg\n",
+        grip, rms_deg, r.scene_fitted[0], r.scene_fitted[1], r.scene_fitted[2]);
     // At 55 N the fit (3.5 / 2.3 / 6.7 kg against 16 / 5 / 4.1 kg) is closer than stop 57's 0.01
     // deg: the scanned drawer twin's calibrated fits were too (docs/calibrate.md, stop 58).
     if (grip == 55.0) EXPECT_LT(rms_deg, 0.01);
@@ -201,8 +202,8 @@ TEST(RobotSysid, RecoversTheMassOfWhatTheArmLiftsFromTheHold) {
   const sim::TaskSpec rough = sim::LoadTaskSpec("peg_insertion");  // the model's controller
   RobotSysidOptions quick = options;
   quick.controller.iterations = 1;
-  const RobotSysidResult guess = IdentifyRobotPhysics(
-      rough, s.scene, {s.Record("free", FreeArmTargets(rough))}, runs, quick);
+  const RobotSysidResult guess =
+      IdentifyRobotPhysics(rough, s.scene, {s.Record("free", FreeArmTargets(rough))}, runs, quick);
   std::printf("a rough controller: free moves %.3g deg RMS off; %.4f kg, bound %.0f%%\n",
               std::sqrt(guess.free_error_after) * 180 / M_PI, guess.scene_fitted[0],
               100 * guess.scene_controller_bound[0]);
