@@ -18,12 +18,19 @@ function(twinforge_module name)
     PUBLIC TWINFORGE_ASSETS_DIR="${TWINFORGE_SOURCE_DIR}/assets")
 endfunction()
 
-# twinforge_test(<file_test.cpp> DEPS ... [LABELS ...]): one gtest file beside its code.
+# twinforge_test(<file_test.cpp> DEPS ... [LABELS ...] [COST seconds]): one gtest file beside its
+# code. COST, for a file with a long test: about its longest test's seconds on one core. ctest -j
+# starts tests in falling cost, so a fresh build's long tests run first instead of leaving one core
+# idle while a long one started last finishes (the CI machine has no timings of earlier runs).
 function(twinforge_test file)
   if(NOT TWINFORGE_BUILD_TESTS)
     return()
   endif()
-  cmake_parse_arguments(ARG "" "" "DEPS;LABELS" ${ARGN})
+  cmake_parse_arguments(ARG "" "COST" "DEPS;LABELS" ${ARGN})
+  set(cost)
+  if(ARG_COST)
+    set(cost COST ${ARG_COST})
+  endif()
   get_filename_component(stem ${file} NAME_WE)
   get_filename_component(module ${CMAKE_CURRENT_SOURCE_DIR} NAME)
   set(target ${module}_${stem})
@@ -36,8 +43,8 @@ function(twinforge_test file)
     # Discovery writes a list property unquoted (LABELS a b: b is read as another property), so
     # a file with labels of its own has its tests listed from the source at configure time.
     gtest_add_tests(TARGET ${target} SOURCES ${file} TEST_LIST tests)
-    set_tests_properties(${tests} PROPERTIES LABELS "${module};${ARG_LABELS}")
+    set_tests_properties(${tests} PROPERTIES LABELS "${module};${ARG_LABELS}" ${cost})
   else()
-    gtest_discover_tests(${target} PROPERTIES LABELS "${module}" DISCOVERY_TIMEOUT 60)
+    gtest_discover_tests(${target} PROPERTIES LABELS "${module}" ${cost} DISCOVERY_TIMEOUT 60)
   endif()
 endfunction()
