@@ -9,6 +9,7 @@
 #include "core/image.h"
 #include "core/thread_pool.h"
 #include "learn/evaluate.h"
+#include "real2sim/calibrate/sysid_bench.h"
 #include "sim/bench.h"
 #include "sim/camera.h"
 #include "sim/expert.h"
@@ -215,9 +216,19 @@ void AddSimCommands(CLI::App& parent, int& exit_code) {
       ->check(CLI::PositiveNumber);
   bench->add_option("--num-envs", bench_options->num_envs, "environments in the VecEnv")
       ->check(CLI::PositiveNumber);
-  bench->callback([bench_task, bench_options, &exit_code] {
-    auto task = std::make_shared<const sim::Task>(sim::LoadTaskSpec(*bench_task));
-    std::cout << sim::RunSimBench(task, *bench_options).dump(2) << std::endl;
+  auto bench_sysid = std::make_shared<bool>(false);
+  bench->add_flag("--sysid", *bench_sysid,
+                  "time sysid's replays instead: a controller fit on 1 and 2 threads, against raw "
+                  "mj_step on 1 and 2");
+  bench->callback([bench_task, bench_options, bench_sysid, &exit_code] {
+    const sim::TaskSpec spec = sim::LoadTaskSpec(*bench_task);
+    if (*bench_sysid) {
+      std::cout << real2sim::RunSysidBench(spec, {.repeats = bench_options->repeats}).dump(2)
+                << std::endl;
+    } else {
+      auto task = std::make_shared<const sim::Task>(spec);
+      std::cout << sim::RunSimBench(task, *bench_options).dump(2) << std::endl;
+    }
     exit_code = 0;
   });
 

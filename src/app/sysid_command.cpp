@@ -18,6 +18,7 @@ namespace {
 
 struct SysidCli {
   std::string twin, task, out, config, recorded;
+  int threads = 0;  // 0: the machine's
   RealityCli reality;
   real2sim::RobotSysidOptions options;
 };
@@ -63,10 +64,16 @@ void AddSysidCommand(CLI::App& parent, int& exit_code) {
                    "fit the runs an earlier sysid recorded (its sysid/trajectories.json) instead "
                    "of recording on the robot")
       ->check(CLI::ExistingFile);
+  sysid
+      ->add_option("--threads", cli->threads,
+                   "replays run at once (default: the machine's threads; the fit does not depend "
+                   "on it)")
+      ->check(CLI::PositiveNumber);
   cli->reality.Add(sysid);
   sysid->callback([cli, &exit_code] {
     if (!cli->config.empty())
       cli->options = core::LoadConfig<real2sim::RobotSysidOptions>(cli->config);
+    cli->options.threads = cli->threads;
     RunSysid(*cli);
     exit_code = 0;
   });

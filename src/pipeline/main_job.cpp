@@ -148,7 +148,9 @@ class Job {
             {"identified/task.yaml", "identified/sysid/sysid.json"}, [&] {
               std::filesystem::remove_all(identified);
               core::Progress progress("sysid", 0, "replays");
-              IdentifyTwin(Robot(), twin, identified, o_.sysid_options, &progress);
+              real2sim::RobotSysidOptions sysid = o_.sysid_options;
+              sysid.threads = o_.threads;
+              IdentifyTwin(Robot(), twin, identified, sysid, &progress);
               progress.Finish();
             });
       twin = identified;

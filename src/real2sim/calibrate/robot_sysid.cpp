@@ -8,6 +8,7 @@
 
 #include "core/error.h"
 #include "core/progress.h"
+#include "core/thread_pool.h"
 #include "sim/expert.h"
 
 namespace twinforge::real2sim {
@@ -237,6 +238,49 @@ std::vector<double> TwinReplay::NominalScene(const std::vector<PhysicalParameter
   return values;
 }
 
+namespace {
+
+using Points = std::vector<std::vector<double>>;
+
+// The twin replayed on several threads, a TwinReplay each: a batch's points are spread over them.
+// Every run starts from a reset, so each result depends on its point only, and a fit is the same
+// whatever the thread count.
+class ParallelReplay {
+ public:
+  ParallelReplay(const sim::TaskSpec& twin, int threads)
+      : pool_(threads > 0 ? threads : core::DefaultThreadCount()) {
+    for (int i = 0; i < pool_.size(); ++i) replays_.push_back(std::make_unique<TwinReplay>(twin));
+  }
+  TwinReplay& first() { return *replays_.front(); }
+  // f(replay, point) at every point.
+  template <class T>
+  std::vector<T> Map(const Points& points,
+                     const std::function<T(TwinReplay&, const std::vector<double>&)>& f) {
+    std::vector<T> out(points.size());
+    pool_.ParallelRanges(static_cast<int64_t>(points.size()),
+                         [&](int range, int64_t begin, int64_t end) {
+                           for (int64_t i = begin; i < end; ++i)
+                             out[i] = f(*replays_[range], points[i]);
+                         });
+    return out;
+  }
+
+ private:
+  core::ThreadPool pool_;
+  std::vector<std::unique_ptr<TwinReplay>> replays_;
+};
+
+// `f` applied to each point.
+Points Each(const Points& points,
+            const std::function<std::vector<double>(std::vector<double>)>& f) {
+  Points out;
+  out.reserve(points.size());
+  for (const auto& p : points) out.push_back(f(p));
+  return out;
+}
+
+}  // namespace
+
 RobotSysidResult IdentifyRobotPhysics(const sim::TaskSpec& twin,
                                       const std::vector<PhysicalParameter>& scene,
                                       const std::vector<RobotTrajectory>& free_moves,
@@ -244,7 +288,8 @@ RobotSysidResult IdentifyRobotPhysics(const sim::TaskSpec& twin,
                                       const RobotSysidOptions& options, core::Progress* progress) {
   RobotSysidResult r;
   r.scene = scene;
-  TwinReplay replay(twin);
+  ParallelReplay parallel(twin, options.threads);
+  TwinReplay& replay = parallel.first();
   r.start.servo = twin.control.servo;
   r.start.arm = twin.control.arm_scales;
   r.start.grip_force =
@@ -253,9 +298,11 @@ RobotSysidResult IdentifyRobotPhysics(const sim::TaskSpec& twin,
   RobotPhysics physics = r.start;
   r.free_error_before = replay.Error(physics, scene, free_moves);
   r.task_error_before = replay.Error(physics, scene, task_runs);
-  int done = 0;
-  auto tick = [&](const char* stage) {
-    if (progress && ++done % 10 == 0) progress->Set(done, stage);
+  int done = 0;  // replays, for the progress line (every tenth)
+  auto tick = [&](const char* stage, size_t replays) {
+    const int before = done;
+    done += static_cast<int>(replays);
+    if (progress && before / 10 != done / 10) progress->Set(done, stage);
   };
 
   // The controller, from the free moves: interpolation in (0, 1], latency up to a control period
@@ -265,11 +312,14 @@ RobotSysidResult IdentifyRobotPhysics(const sim::TaskSpec& twin,
     const double period = twin.control.substeps * dt;
     const std::vector<double> lower{0.01, 0.001, 0.25, 0.25, 0.25, 0.25},
         upper{1.0, std::min(0.1, period - 1e-9), 4, 4, 4, 4};
-    auto residuals = [&](const std::vector<double>& v) {
-      RobotPhysics p = physics;
-      SetController(p, v);
-      tick("controller");
-      return replay.Residuals(p, scene, free_moves);
+    auto residuals = [&](const Points& points) {
+      tick("controller", points.size());
+      return parallel.Map<Eigen::VectorXd>(
+          points, [&](TwinReplay& twin_replay, const std::vector<double>& v) {
+            RobotPhysics p = physics;
+            SetController(p, v);
+            return twin_replay.Residuals(p, scene, free_moves);
+          });
     };
     // First with the joints' damping held at the twin's: it acts nearly as kd does, and left
     // free from the start the fit can slide into a valley of high kp and short latency.
@@ -295,8 +345,8 @@ RobotSysidResult IdentifyRobotPhysics(const sim::TaskSpec& twin,
     }
     LeastSquaresResult fit;
     for (const auto& start : starts) {
-      LeastSquaresResult from = LeastSquaresLogSpace(
-          [&](const std::vector<double>& v) { return residuals(held_damping(v)); }, start,
+      LeastSquaresResult from = BatchLeastSquaresLogSpace(
+          [&](const Points& v) { return residuals(Each(v, held_damping)); }, start,
           drop_damping(lower), drop_damping(upper), options.controller);
       r.replays += from.replays;
       spdlog::info("sysid: controller from latency {:.0f} ms: {:.3g} rad^2", 1e3 * start[1],
@@ -315,9 +365,11 @@ RobotSysidResult IdentifyRobotPhysics(const sim::TaskSpec& twin,
     for (int steps = std::max(0, nearest - 1); steps <= nearest + 1; ++steps) {
       const double latency = steps * dt;
       if (latency > upper[1]) break;
-      LeastSquaresResult held = LeastSquaresLogSpace(
-          [&](const std::vector<double>& others) {
-            return residuals(held_damping(WithLatency(others, latency)));
+      LeastSquaresResult held = BatchLeastSquaresLogSpace(
+          [&](const Points& others) {
+            return residuals(Each(others, [&](std::vector<double> v) {
+              return held_damping(WithLatency(std::move(v), latency));
+            }));
           },
           WithoutLatency(fit.values), drop_damping(WithoutLatency(lower)),
           drop_damping(WithoutLatency(upper)), options.controller);
@@ -340,8 +392,11 @@ RobotSysidResult IdentifyRobotPhysics(const sim::TaskSpec& twin,
     // the ones reported, for the damping as for the rest (where it did not move, at the same
     // values).
     const double latency = fit.values[1];
-    const LeastSquaresResult last = LeastSquaresLogSpace(
-        [&](const std::vector<double>& others) { return residuals(WithLatency(others, latency)); },
+    const LeastSquaresResult last = BatchLeastSquaresLogSpace(
+        [&](const Points& others) {
+          return residuals(Each(
+              others, [&](std::vector<double> v) { return WithLatency(std::move(v), latency); }));
+        },
         WithoutLatency(fit.values), WithoutLatency(lower), WithoutLatency(upper),
         options.controller);
     r.replays += last.replays;
@@ -368,12 +423,15 @@ RobotSysidResult IdentifyRobotPhysics(const sim::TaskSpec& twin,
   r.grip_error_before = grip_error(physics);
   if (!gripper_moves.empty()) {
     const double force = physics.grip_force;
-    const LeastSquaresResult fit = LeastSquaresLogSpace(
-        [&](const std::vector<double>& v) {
-          RobotPhysics p = physics;
-          p.grip_force = v[0];
-          tick("grip");
-          return replay.GripperResiduals(p, scene, gripper_moves);
+    const LeastSquaresResult fit = BatchLeastSquaresLogSpace(
+        [&](const Points& points) {
+          tick("grip", points.size());
+          return parallel.Map<Eigen::VectorXd>(
+              points, [&](TwinReplay& twin_replay, const std::vector<double>& v) {
+                RobotPhysics p = physics;
+                p.grip_force = v[0];
+                return twin_replay.GripperResiduals(p, scene, gripper_moves);
+              });
         },
         {force}, {0.1 * force}, {10 * force}, options.controller);
     r.replays += fit.replays;
@@ -394,18 +452,24 @@ RobotSysidResult IdentifyRobotPhysics(const sim::TaskSpec& twin,
       lower.push_back(p.lower);
       upper.push_back(p.upper);
     }
-    auto with_scene = [&](const std::vector<double>& v, const char* stage) {
-      tick(stage);
+    auto with_scene = [&](const std::vector<double>& v) {
       RobotPhysics p = physics;
       p.scene = v;
       return p;
     };
+    // The runs' residuals at each of `points` (scene values).
+    auto scene_residuals = [&](const Points& points, const std::vector<RobotTrajectory>& runs,
+                               const char* stage) {
+      tick(stage, points.size());
+      return parallel.Map<Eigen::VectorXd>(
+          points, [&](TwinReplay& twin_replay, const std::vector<double>& v) {
+            return twin_replay.Residuals(with_scene(v), scene, runs);
+          });
+    };
     auto fit_to = [&](const std::vector<RobotTrajectory>& runs, const std::vector<double>& from) {
-      LeastSquaresResult fit = LeastSquaresLogSpace(
-          [&](const std::vector<double>& v) {
-            return replay.Residuals(with_scene(v, "scene"), scene, runs);
-          },
-          from, lower, upper, options.scene);
+      LeastSquaresResult fit = BatchLeastSquaresLogSpace(
+          [&](const Points& points) { return scene_residuals(points, runs, "scene"); }, from, lower,
+          upper, options.scene);
       r.replays += fit.replays;
       return fit;
     };
@@ -415,9 +479,12 @@ RobotSysidResult IdentifyRobotPhysics(const sim::TaskSpec& twin,
     // the error bars (docs/calibrate.md, stop 57).
     std::vector<double> from = physics.scene;
     if (options.scene_search.iterations > 0) {
-      const SysidResult search = MinimizeLogSpace(
-          [&](const std::vector<double>& v) {
-            return replay.Error(with_scene(v, "scene search"), scene, task_runs);
+      const SysidResult search = BatchMinimizeLogSpace(
+          [&](const Points& points) {
+            std::vector<double> errors;
+            for (const auto& r : scene_residuals(points, task_runs, "scene search"))
+              errors.push_back(MeanSquare(r));
+            return errors;
           },
           from, lower, upper, options.scene_search);
       r.replays += search.replays;
@@ -446,13 +513,15 @@ RobotSysidResult IdentifyRobotPhysics(const sim::TaskSpec& twin,
     // what halving the value changes in the runs (`effect`, RMS), the value would be off by half
     // their ratio. A lift's hold tells a peg's mass by 0.0008 deg, and with a controller fitted
     // only to 0.022 deg a peg of 80 g was taken as 184 g (docs/calibrate.md, stop 65).
-    const Eigen::VectorXd at_fit =
-        replay.Residuals(with_scene(fit.values, "scene"), scene, task_runs);
+    Points bound_points{fit.values};  // the fit, then each value halved
     for (size_t i = 0; i < scene.size(); ++i) {
-      std::vector<double> halved = fit.values;
-      halved[i] *= 0.5;
-      const double effect = std::sqrt(
-          MeanSquare(replay.Residuals(with_scene(halved, "scene"), scene, task_runs) - at_fit));
+      bound_points.push_back(fit.values);
+      bound_points.back()[i] *= 0.5;
+    }
+    const std::vector<Eigen::VectorXd> bound_runs =
+        scene_residuals(bound_points, task_runs, "scene");
+    for (size_t i = 0; i < scene.size(); ++i) {
+      const double effect = std::sqrt(MeanSquare(bound_runs[i + 1] - bound_runs[0]));
       r.scene_controller_bound.push_back(free_rms == 0 ? 0.0
                                          : effect > 0  ? 0.5 * free_rms / effect
                                                        : HUGE_VAL);

@@ -119,6 +119,9 @@ struct RobotSysidOptions {
   // the world's own geometry; with its scanned twin to 0.033 deg, and with that twin calibrated
   // to 0.007-0.009 deg, at values 17-80% off the hidden ones: docs/calibrate.md, stop 58.)
   double max_task_rms_deg = 0.003;
+  // Replays run at once, one twin each (0: the machine's hardware threads). The fit does not
+  // depend on it, so it is not part of the options a run is keyed on (not serialized).
+  int threads = 0;
   template <class A>
   void Serialize(A& a) {
     a("controller_iterations", controller.iterations);

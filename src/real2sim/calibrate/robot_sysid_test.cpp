@@ -76,6 +76,41 @@ TEST(RobotSysid, RecoversAKnownControllerAndDrawer) {
   EXPECT_NEAR(id.scene[2], 1.4 * s.twin_mass, 0.01 * 1.4 * s.twin_mass);
 }
 
+// A batch of replays is spread over threads, one twin each; the fit is the same whatever their
+// number: the controller, the grip and the scene, the search included.
+TEST(RobotSysid, TheFitIsTheSameWhateverTheThreadCount) {
+  Synthetic s;
+  // Short runs (held 2 periods; the expert at full speed): only the sameness is tested.
+  const std::vector<RobotTrajectory> free{s.Record("free", FreeArmTargets(s.twin, 0.15, 2))};
+  const std::vector<RobotTrajectory> runs{s.Record("full_speed", ExpertTargets(s.twin, 1))};
+  RobotSysidOptions options;
+  options.controller.iterations = 1;
+  options.scene.iterations = 2;
+  options.scene_search.iterations = 2;
+  std::vector<RobotSysidResult> fits;
+  for (int threads : {1, 2, 3}) {
+    options.threads = threads;
+    fits.push_back(IdentifyRobotPhysics(s.twin, s.scene, free, runs, options));
+  }
+  const RobotPhysics& one = fits[0].identified;
+  EXPECT_LT(fits[0].free_error_after, 0.5 * fits[0].free_error_before);  // it fitted something
+  for (size_t k = 1; k < fits.size(); ++k) {
+    const RobotPhysics& other = fits[k].identified;
+    EXPECT_EQ(other.servo.interpolation, one.servo.interpolation);
+    EXPECT_EQ(other.servo.latency, one.servo.latency);
+    EXPECT_EQ(other.arm.kp, one.arm.kp);
+    EXPECT_EQ(other.arm.kd, one.arm.kd);
+    EXPECT_EQ(other.arm.damping, one.arm.damping);
+    EXPECT_EQ(other.arm.frictionloss, one.arm.frictionloss);
+    EXPECT_EQ(other.grip_force, one.grip_force);
+    EXPECT_EQ(fits[k].scene_fitted, fits[0].scene_fitted);
+    EXPECT_EQ(fits[k].scene_curve, fits[0].scene_curve);
+    EXPECT_EQ(fits[k].controller_curve, fits[0].controller_curve);
+    EXPECT_EQ(fits[k].scene_controller_bound, fits[0].scene_controller_bound);
+    EXPECT_EQ(fits[k].replays, fits[0].replays);
+  }
+}
+
 // The task runs are one plan, each target sent once, twice or three times: re-planned at half
 // speed the expert took another path, on which its fingers brushed the proxy drawer's bar.
 TEST(RobotSysid, TheTaskRunsRepeatOnePlan) {

@@ -37,6 +37,17 @@ LogSpace ToLogSpace(const std::vector<double>& start, const std::vector<double>&
   return s;
 }
 
+// A one-point function as a batch of one point at a time.
+template <class T>
+Batch<T> OneByOne(const std::function<T(const std::vector<double>&)>& f) {
+  return [&f](const std::vector<std::vector<double>>& points) {
+    std::vector<T> out;
+    out.reserve(points.size());
+    for (const auto& p : points) out.push_back(f(p));
+    return out;
+  };
+}
+
 }  // namespace
 
 const char* ToString(PhysicalParameter::Kind kind) {
@@ -151,15 +162,27 @@ double TrajectoryError(const mjModel* m, const std::vector<Trajectory>& trajecto
 SysidResult MinimizeLogSpace(const std::function<double(const std::vector<double>&)>& objective,
                              const std::vector<double>& start, const std::vector<double>& lower,
                              const std::vector<double>& upper, const SysidOptions& options) {
+  return BatchMinimizeLogSpace(OneByOne(objective), start, lower, upper, options);
+}
+
+SysidResult BatchMinimizeLogSpace(const Batch<double>& objective, const std::vector<double>& start,
+                                  const std::vector<double>& lower,
+                                  const std::vector<double>& upper, const SysidOptions& options) {
   const size_t n = start.size();
   SysidResult result;
   auto [x, lo, hi] = ToLogSpace(start, lower, upper);
-  std::vector<double> values(n);
-  auto error = [&](const std::vector<double>& at) {
-    for (size_t i = 0; i < n; ++i) values[i] = std::exp(at[i]);
-    ++result.replays;
-    return objective(values);
+  // The errors at log-parameters `at`, one batch.
+  auto errors = [&](const std::vector<std::vector<double>>& at) {
+    std::vector<std::vector<double>> values(at.size(), std::vector<double>(n));
+    for (size_t k = 0; k < at.size(); ++k)
+      for (size_t i = 0; i < n; ++i) values[k][i] = std::exp(at[k][i]);
+    result.replays += static_cast<int>(at.size());
+    std::vector<double> out = objective(values);
+    if (out.size() != at.size())
+      throw core::ConfigError("sysid", "objective", "one value per point of a batch");
+    return out;
   };
+  auto error = [&](const std::vector<double>& at) { return errors({at}).front(); };
   auto clamp = [&](std::vector<double>& at) {
     for (size_t i = 0; i < n; ++i) at[i] = std::clamp(at[i], lo[i], hi[i]);
   };
@@ -170,13 +193,16 @@ SysidResult MinimizeLogSpace(const std::function<double(const std::vector<double
     // Normalized gradient steps with backtracking: a step that does not lower the error is halved.
     double step = options.step;
     for (int it = 0; it < options.iterations && step > 1e-6; ++it) {
+      std::vector<std::vector<double>> steps;  // up and down along each parameter
+      for (size_t i = 0; i < n; ++i)
+        for (double sign : {1.0, -1.0}) {
+          steps.push_back(best);
+          steps.back()[i] += sign * options.difference;
+        }
+      const std::vector<double> sides = errors(steps);
       std::vector<double> g(n);
-      for (size_t i = 0; i < n; ++i) {
-        std::vector<double> up = best, down = best;
-        up[i] += options.difference;
-        down[i] -= options.difference;
-        g[i] = (error(up) - error(down)) / (2 * options.difference);
-      }
+      for (size_t i = 0; i < n; ++i)
+        g[i] = (sides[2 * i] - sides[2 * i + 1]) / (2 * options.difference);
       const double norm = std::sqrt(std::inner_product(g.begin(), g.end(), g.begin(), 0.0));
       if (norm <= 0) break;
       std::vector<double> next = best;
@@ -204,16 +230,16 @@ SysidResult MinimizeLogSpace(const std::function<double(const std::vector<double
     std::vector<double> mean = best, scale(n, 1.0);
     double sigma = options.sigma;
     for (int it = 0; it < options.iterations; ++it) {
-      std::vector<std::pair<double, std::vector<double>>> samples;
+      std::vector<std::vector<double>> drawn;
       for (int k = 0; k < lambda; ++k) {
-        std::vector<double> z(n), s(n);
-        for (size_t i = 0; i < n; ++i) {
-          z[i] = normal(rng);
-          s[i] = mean[i] + sigma * scale[i] * z[i];
-        }
+        std::vector<double> s(n);
+        for (size_t i = 0; i < n; ++i) s[i] = mean[i] + sigma * scale[i] * normal(rng);
         clamp(s);
-        samples.push_back({error(s), s});
+        drawn.push_back(std::move(s));
       }
+      const std::vector<double> e = errors(drawn);
+      std::vector<std::pair<double, std::vector<double>>> samples;
+      for (int k = 0; k < lambda; ++k) samples.push_back({e[k], std::move(drawn[k])});
       std::sort(samples.begin(), samples.end(),
                 [](const auto& a, const auto& b) { return a.first < b.first; });
       if (samples.front().first < best_error) {
@@ -247,6 +273,14 @@ LeastSquaresResult LeastSquaresLogSpace(
     const std::function<Eigen::VectorXd(const std::vector<double>&)>& residuals,
     const std::vector<double>& start, const std::vector<double>& lower,
     const std::vector<double>& upper, const SysidOptions& options) {
+  return BatchLeastSquaresLogSpace(OneByOne(residuals), start, lower, upper, options);
+}
+
+LeastSquaresResult BatchLeastSquaresLogSpace(const Batch<Eigen::VectorXd>& residuals,
+                                             const std::vector<double>& start,
+                                             const std::vector<double>& lower,
+                                             const std::vector<double>& upper,
+                                             const SysidOptions& options) {
   const int n = static_cast<int>(start.size());
   LeastSquaresResult result;
   const auto log_space = ToLogSpace(start, lower, upper);
@@ -255,21 +289,31 @@ LeastSquaresResult LeastSquaresLogSpace(
   };
   Eigen::VectorXd x = as_vector(log_space.start);
   const Eigen::VectorXd lo = as_vector(log_space.lower), hi = as_vector(log_space.upper);
-  auto evaluate = [&](const Eigen::VectorXd& at) {
-    std::vector<double> values(n);
-    for (int i = 0; i < n; ++i) values[i] = std::exp(at[i]);
-    ++result.replays;
-    return residuals(values);
+  // The residuals at log-parameters `at`, one batch.
+  auto evaluate_all = [&](const std::vector<Eigen::VectorXd>& at) {
+    std::vector<std::vector<double>> values(at.size(), std::vector<double>(n));
+    for (size_t k = 0; k < at.size(); ++k)
+      for (int i = 0; i < n; ++i) values[k][i] = std::exp(at[k][i]);
+    result.replays += static_cast<int>(at.size());
+    std::vector<Eigen::VectorXd> out = residuals(values);
+    if (out.size() != at.size())
+      throw core::ConfigError("sysid", "residuals", "one vector per point of a batch");
+    return out;
   };
-  // Central differences, stepping inward at a bound.
+  auto evaluate = [&](const Eigen::VectorXd& at) { return evaluate_all({at}).front(); };
+  // Central differences, stepping inward at a bound: up and down along each parameter, one batch.
   auto jacobian = [&](const Eigen::VectorXd& at, long rows) {
-    Eigen::MatrixXd j(rows, n);
+    std::vector<Eigen::VectorXd> steps;
     for (int i = 0; i < n; ++i) {
-      Eigen::VectorXd up = at, down = at;
-      up[i] = std::min(at[i] + options.difference, hi[i]);
-      down[i] = std::max(at[i] - options.difference, lo[i]);
-      j.col(i) = (evaluate(up) - evaluate(down)) / std::max(up[i] - down[i], 1e-12);
+      steps.push_back(at);
+      steps.back()[i] = std::min(at[i] + options.difference, hi[i]);
+      steps.push_back(at);
+      steps.back()[i] = std::max(at[i] - options.difference, lo[i]);
     }
+    const std::vector<Eigen::VectorXd> r = evaluate_all(steps);
+    Eigen::MatrixXd j(rows, n);
+    for (int i = 0; i < n; ++i)
+      j.col(i) = (r[2 * i] - r[2 * i + 1]) / std::max(steps[2 * i][i] - steps[2 * i + 1][i], 1e-12);
     return j;
   };
   Eigen::VectorXd r = evaluate(x);

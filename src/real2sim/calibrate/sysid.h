@@ -67,11 +67,22 @@ struct SysidResult {
   int replays = 0;             // trajectory replays spent
 };
 
+// An objective (or residuals) evaluated at several points at once, so that the caller can spread
+// them over threads: the result at each point must depend on that point only.
+template <class T>
+using Batch = std::function<std::vector<T>(const std::vector<std::vector<double>>&)>;
+
 // Minimizes `objective` over positive values, searched in log space within [lower, upper] from
 // `start`, by the method of `options`. Returns the best values found and the error history.
 SysidResult MinimizeLogSpace(const std::function<double(const std::vector<double>&)>& objective,
                              const std::vector<double>& start, const std::vector<double>& lower,
                              const std::vector<double>& upper, const SysidOptions& options = {});
+// As above, evaluating a gradient's differences or a CMA-ES generation as one batch. The search is
+// the same: the points are drawn and evaluated in the same order.
+SysidResult BatchMinimizeLogSpace(const Batch<double>& objective, const std::vector<double>& start,
+                                  const std::vector<double>& lower,
+                                  const std::vector<double>& upper,
+                                  const SysidOptions& options = {});
 
 // Least squares over positive values in log space: Levenberg-Marquardt on `residuals` with the
 // Jacobian by central differences (`options.difference`), `options.iterations` at most. Also
@@ -84,6 +95,12 @@ LeastSquaresResult LeastSquaresLogSpace(
     const std::function<Eigen::VectorXd(const std::vector<double>&)>& residuals,
     const std::vector<double>& start, const std::vector<double>& lower,
     const std::vector<double>& upper, const SysidOptions& options = {});
+// As above, evaluating each Jacobian's central differences as one batch.
+LeastSquaresResult BatchLeastSquaresLogSpace(const Batch<Eigen::VectorXd>& residuals,
+                                             const std::vector<double>& start,
+                                             const std::vector<double>& lower,
+                                             const std::vector<double>& upper,
+                                             const SysidOptions& options = {});
 
 // Identifies `parameters` of `m` (their current values are the start) from `trajectories`.
 // `m` is left with the identified values.
