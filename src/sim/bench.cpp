@@ -22,22 +22,16 @@ double Rate(const std::function<double()>& work) {
 
 }  // namespace
 
-nlohmann::json RunSimBench(std::shared_ptr<const Task> task, const BenchOptions& options) {
-  const int substeps = task->spec().control.substeps;
-
-  // Baseline: raw mj_step on a copy of the task model, driven like the env drives it (joint
-  // targets moved every control period, arm gravity compensated) but without IK, task logic or
-  // batching.
-  Env reference(task);
-  reference.Reset(0, 1);
-  const auto& robot = task->index().robot;
+RawStepRates MeasureRawSteps(const Env& reference, int steps, uint64_t seed) {
+  const auto& robot = reference.task().index().robot;
+  const int substeps = reference.task().spec().control.substeps;
   struct RawSim {
     ModelPtr model;
     DataPtr data;
     core::Rng rng;
   };
-  auto make_raw = [&](uint64_t seed) {
-    RawSim sim{ModelPtr(mj_copyModel(nullptr, reference.model())), nullptr, core::Rng(seed)};
+  auto make_raw = [&](uint64_t raw_seed) {
+    RawSim sim{ModelPtr(mj_copyModel(nullptr, reference.model())), nullptr, core::Rng(raw_seed)};
     sim.data = MakeData(sim.model.get());
     return sim;
   };
@@ -47,7 +41,7 @@ nlohmann::json RunSimBench(std::shared_ptr<const Task> task, const BenchOptions&
     mj_resetData(m, d);
     mju_copy(d->qpos, reference.data()->qpos, m->nq);
     mju_copy(d->ctrl, reference.data()->ctrl, m->nu);
-    for (int i = 0; i < options.raw_steps; ++i) {
+    for (int i = 0; i < steps; ++i) {
       if (i % substeps == 0)
         for (int k = 0; k < kArmDof; ++k)
           d->ctrl[robot.arm_actuator[k]] =
@@ -56,18 +50,27 @@ nlohmann::json RunSimBench(std::shared_ptr<const Task> task, const BenchOptions&
         d->qfrc_applied[robot.arm_dof[k]] = d->qfrc_bias[robot.arm_dof[k]];
       mj_step(m, d);
     }
-    return double(options.raw_steps);
+    return double(steps);
   };
-  RawSim raw_a = make_raw(7), raw_b = make_raw(8);
-  auto raw_run = [&] { return raw_steps(raw_a); };
-  // The same on two threads at once, one simulation each: what this machine's two cores give
-  // to perfectly independent work, the ceiling for the VecEnv's scaling.
-  auto raw_run_2 = [&] {
+  RawSim raw_a = make_raw(seed), raw_b = make_raw(seed + 1);
+  RawStepRates rates;
+  rates.one = Rate([&] { return raw_steps(raw_a); });
+  rates.two = Rate([&] {
     std::thread other([&] { raw_steps(raw_b); });
     raw_steps(raw_a);
     other.join();
-    return 2.0 * options.raw_steps;
-  };
+    return 2.0 * steps;
+  });
+  return rates;
+}
+
+nlohmann::json RunSimBench(std::shared_ptr<const Task> task, const BenchOptions& options) {
+  const int substeps = task->spec().control.substeps;
+
+  // Baseline: raw mj_step (MeasureRawSteps), its two-thread rate the ceiling for the VecEnv's
+  // scaling.
+  Env reference(task);
+  reference.Reset(0, 1);
 
   // VecEnv physics steps with random discrete actions.
   VecEnv vec1(task, {.num_envs = options.num_envs, .threads = 1, .seed = 1, .level = 1});
@@ -128,8 +131,9 @@ nlohmann::json RunSimBench(std::shared_ptr<const Task> task, const BenchOptions&
   std::vector<double> raw, raw2, v1, v2, rays, embree_rays, clouds, overhead, scaling, raw_scaling,
       cloud_ratio;
   for (int r = 0; r < options.repeats; ++r) {
-    raw.push_back(Rate(raw_run));
-    raw2.push_back(Rate(raw_run_2));
+    const RawStepRates raw_rates = MeasureRawSteps(reference, options.raw_steps, 7 + 2 * r);
+    raw.push_back(raw_rates.one);
+    raw2.push_back(raw_rates.two);
     v1.push_back(Rate([&] { return vec_run(vec1); }));
     v2.push_back(Rate([&] { return vec_run(vec2); }));
     rays.push_back(Rate(ray_run));

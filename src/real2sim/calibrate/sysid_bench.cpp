@@ -1,10 +1,8 @@
 #include "real2sim/calibrate/sysid_bench.h"
 
-#include <thread>
-
 #include "core/measure.h"
 #include "real2sim/calibrate/robot_sysid.h"
-#include "sim/env.h"
+#include "sim/bench.h"
 
 namespace twinforge::real2sim {
 
@@ -28,16 +26,8 @@ nlohmann::json RunSysidBench(const sim::TaskSpec& task, const SysidBenchOptions&
   };
 
   // Baseline: raw mj_step on copies of the twin's model from its level-0 start.
-  auto shared = std::make_shared<const sim::Task>(task);
-  sim::Env start(shared);
+  sim::Env start(std::make_shared<const sim::Task>(task));
   start.Reset(0, 0);
-  auto raw = [&] {
-    sim::ModelPtr m(mj_copyModel(nullptr, start.model()));
-    sim::DataPtr d = sim::MakeData(m.get());
-    mju_copy(d->qpos, start.data()->qpos, m->nq);
-    mju_copy(d->ctrl, start.data()->ctrl, m->nu);
-    for (int i = 0; i < options.raw_steps; ++i) mj_step(m.get(), d.get());
-  };
   auto seconds = [](const std::function<void()>& work) {
     const auto t0 = core::Clock::now();
     work();
@@ -51,12 +41,7 @@ nlohmann::json RunSysidBench(const sim::TaskSpec& task, const SysidBenchOptions&
   int replays = 0;
   const double steps_per_replay = static_cast<double>(free.targets.size()) * task.control.substeps;
   for (int r = 0; r < options.repeats; ++r) {
-    const double one = seconds(raw);
-    const double two = seconds([&] {
-      std::thread other(raw);
-      raw();
-      other.join();
-    });
+    const sim::RawStepRates raw = sim::MeasureRawSteps(start, options.raw_steps, 7 + 2 * r);
     RobotSysidResult a, b;
     const double t1 = seconds([&] { a = fit(1); });
     const double t2 = seconds([&] { b = fit(2); });
@@ -67,8 +52,8 @@ nlohmann::json RunSysidBench(const sim::TaskSpec& task, const SysidBenchOptions&
            x.grip_force == y.grip_force && a.controller_curve == b.controller_curve &&
            a.replays == b.replays;
     replays = a.replays;
-    raw1.push_back(options.raw_steps / one);
-    raw2.push_back(2 * options.raw_steps / two);
+    raw1.push_back(raw.one);
+    raw2.push_back(raw.two);
     fit1.push_back(t1);
     fit2.push_back(t2);
     raw_scaling.push_back(raw2.back() / raw1.back());
