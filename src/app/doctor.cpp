@@ -36,7 +36,7 @@ int RunDoctor(std::ostream& out) {
   out << "  HDF5     " << h5_major << "." << h5_minor << "." << h5_release << "\n";
   out << "  BLAS     " << blas.vendor << " at "
       << (blas.library.empty() ? "<not found>" : blas.library) << " (threads " << blas.threads
-      << ")\n";
+      << ", kernels " << (blas.kernels.empty() ? "unknown" : blas.kernels) << ")\n";
 
   checks.push_back({"MuJoCo >= 2.2", mj_version() >= 220, sim::MujocoVersion(),
                     "install Debian's libmujoco-dev (scripts/setup.sh)"});
@@ -52,6 +52,17 @@ int RunDoctor(std::ostream& out) {
   checks.push_back({"BLAS pinned to 1 thread", blas.vendor != "openblas" || blas.threads == 1,
                     std::to_string(blas.threads) + " threads",
                     "twinforge pins BLAS at start-up; something reset it (OPENBLAS_NUM_THREADS?)"});
+  // OpenBLAS 0.3.21 falls back to Prescott's SSE3 kernels on CPUs it does not know; twinforge
+  // restarts itself with OPENBLAS_CORETYPE set (learn/torch_runtime.h).
+  const std::string cpu = learn::KernelsForThisCpu();
+  const bool fallback = blas.vendor == "openblas" && !cpu.empty() &&
+                        (blas.kernels == "Prescott" || blas.kernels == "prescott");
+  checks.push_back({"BLAS kernels fit the CPU", !fallback,
+                    (blas.kernels.empty() ? "unknown" : blas.kernels) + " kernels" +
+                        (cpu.empty() ? " (this CPU has no AVX2)" : ", the CPU runs " + cpu + "'s"),
+                    "OpenBLAS fell back to its SSE3 kernels (~3x slower for our networks): "
+                    "unset OPENBLAS_CORETYPE, or set it to " +
+                        cpu});
   const std::string o3d = real2sim::Open3dSelfCheck();
   checks.push_back({"Open3D TSDF works", o3d.empty(), o3d.empty() ? "ok" : o3d,
                     "reinstall libopen3d-dev (scripts/setup.sh)"});

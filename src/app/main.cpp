@@ -16,6 +16,8 @@
 
 int main(int argc, char** argv) {
   using namespace twinforge;
+  // OpenBLAS's kernels for this CPU, not its SSE3 fallback (see learn/torch_runtime.h).
+  learn::RestartWithTheRightBlasKernels(argv);
   // Before any tensor work: one BLAS thread per process (see learn/torch_runtime.h).
   learn::PinMathThreads(1);
   learn::KeepLargeBuffers();

@@ -4,7 +4,10 @@
 #include <malloc.h>
 #include <torch/torch.h>
 #include <torch/version.h>
+#include <unistd.h>
 
+#include <algorithm>
+#include <cctype>
 #include <cstdlib>
 #include <filesystem>
 
@@ -16,6 +19,29 @@ Fn Symbol(const char* name) {
   return reinterpret_cast<Fn>(::dlsym(RTLD_DEFAULT, name));
 }
 }  // namespace
+
+std::string KernelsForThisCpu() {
+  __builtin_cpu_init();
+  if (__builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512bw") &&
+      __builtin_cpu_supports("avx512vl") && __builtin_cpu_supports("avx512dq") &&
+      __builtin_cpu_supports("avx512cd"))
+    return "SkylakeX";
+  if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma")) return "Haswell";
+  return "";
+}
+
+void RestartWithTheRightBlasKernels(char** argv) {
+  if (std::getenv("OPENBLAS_CORETYPE")) return;  // chosen by the user, or by the restart
+  const BlasInfo blas = QueryBlas();
+  std::string kernels = blas.kernels;
+  std::transform(kernels.begin(), kernels.end(), kernels.begin(),
+                 [](unsigned char c) { return std::tolower(c); });
+  if (blas.vendor != "openblas" || kernels != "prescott") return;
+  const std::string best = KernelsForThisCpu();
+  if (best.empty()) return;
+  ::setenv("OPENBLAS_CORETYPE", best.c_str(), 1);
+  ::execv("/proc/self/exe", argv);
+}
 
 void KeepLargeBuffers() {
   mallopt(M_MMAP_THRESHOLD, 256 << 20);
@@ -57,6 +83,8 @@ BlasInfo QueryBlas() {
   else
     info.vendor = "unknown";
   if (auto get = Symbol<int (*)()>("openblas_get_num_threads")) info.threads = get();
+  if (auto core = Symbol<char* (*)()>("openblas_get_corename"))
+    if (const char* name = core()) info.kernels = name;
   return info;
 }
 

@@ -14,11 +14,25 @@ struct BlasInfo {
   std::string library;  // file that provides sgemm_, e.g. .../openblas-pthread/libblas.so.3
   std::string vendor;   // "openblas", "reference", "mkl", "blis" or "unknown"
   int threads = 0;      // BLAS threads (OpenBLAS only; 0 if unknown)
+  std::string kernels;  // the CPU OpenBLAS chose its kernels for, e.g. "SkylakeX" ("" if unknown)
 };
 
 // Pins OpenBLAS and LibTorch's intra-op pool to `threads` and exports OPENBLAS_NUM_THREADS for
 // child processes. Call once at start-up, before any tensor work.
 void PinMathThreads(int threads = 1);
+
+// The OpenBLAS kernels this CPU can run best: "SkylakeX" with AVX-512, "Haswell" with AVX2 and
+// FMA, "" with neither.
+std::string KernelsForThisCpu();
+
+// OpenBLAS chooses its kernels when it loads, before main(). Debian 12's (0.3.21) does not know
+// recent Intel CPUs (Sapphire Rapids, as on this project's machines) and falls back to Prescott's
+// SSE3 kernels: matmul ran 19 GFLOPS where it runs 149 on the AVX-512 ones, and point-cloud BC
+// and PPO updates 3.3x slower. Where that happened (and OPENBLAS_CORETYPE is not set), this sets
+// OPENBLAS_CORETYPE to KernelsForThisCpu() and starts the program again with the same `argv`;
+// the new process returns here with the right kernels. Call first thing in main(). If the
+// restart fails it returns and the program goes on with the slow kernels (doctor says so).
+void RestartWithTheRightBlasKernels(char** argv);
 
 // Keeps freed large buffers in the heap. A point-cloud batch's activations are ~30 MB, above
 // glibc's largest mmap threshold, so every one was mapped, zero-filled and unmapped: BC ran 1.7x
