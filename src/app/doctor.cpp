@@ -55,9 +55,7 @@ int RunDoctor(std::ostream& out) {
   // OpenBLAS 0.3.21 falls back to Prescott's SSE3 kernels on CPUs it does not know; twinforge
   // restarts itself with OPENBLAS_CORETYPE set (learn/torch_runtime.h).
   const std::string cpu = learn::KernelsForThisCpu();
-  const bool fallback = blas.vendor == "openblas" && !cpu.empty() &&
-                        (blas.kernels == "Prescott" || blas.kernels == "prescott");
-  checks.push_back({"BLAS kernels fit the CPU", !fallback,
+  checks.push_back({"BLAS kernels fit the CPU", !learn::OnSse3Fallback(blas),
                     (blas.kernels.empty() ? "unknown" : blas.kernels) + " kernels" +
                         (cpu.empty() ? " (this CPU has no AVX2)" : ", the CPU runs " + cpu + "'s"),
                     "OpenBLAS fell back to its SSE3 kernels (~3x slower for our networks): "

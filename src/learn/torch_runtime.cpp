@@ -30,16 +30,17 @@ std::string KernelsForThisCpu() {
   return "";
 }
 
-void RestartWithTheRightBlasKernels(char** argv) {
-  if (std::getenv("OPENBLAS_CORETYPE")) return;  // chosen by the user, or by the restart
-  const BlasInfo blas = QueryBlas();
+bool OnSse3Fallback(const BlasInfo& blas) {
   std::string kernels = blas.kernels;
   std::transform(kernels.begin(), kernels.end(), kernels.begin(),
                  [](unsigned char c) { return std::tolower(c); });
-  if (blas.vendor != "openblas" || kernels != "prescott") return;
-  const std::string best = KernelsForThisCpu();
-  if (best.empty()) return;
-  ::setenv("OPENBLAS_CORETYPE", best.c_str(), 1);
+  return blas.vendor == "openblas" && kernels == "prescott" && !KernelsForThisCpu().empty();
+}
+
+void RestartWithTheRightBlasKernels(char** argv) {
+  if (std::getenv("OPENBLAS_CORETYPE")) return;  // chosen by the user, or by the restart
+  if (!OnSse3Fallback(QueryBlas())) return;
+  ::setenv("OPENBLAS_CORETYPE", KernelsForThisCpu().c_str(), 1);
   ::execv("/proc/self/exe", argv);
 }
 

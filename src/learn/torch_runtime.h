@@ -27,12 +27,15 @@ std::string KernelsForThisCpu();
 
 // OpenBLAS chooses its kernels when it loads, before main(). Debian 12's (0.3.21) does not know
 // recent Intel CPUs (Sapphire Rapids, as on this project's machines) and falls back to Prescott's
-// SSE3 kernels: matmul ran 19 GFLOPS where it runs 149 on the AVX-512 ones, and point-cloud BC
-// and PPO updates 3.3x slower. Where that happened (and OPENBLAS_CORETYPE is not set), this sets
+// SSE3 kernels: matmul ran 26 GFLOP/s where it runs 130 on the AVX-512 ones, PPO updates 3.3x and
+// point-cloud BC 2.4-2.8x slower. Where that happened (and OPENBLAS_CORETYPE is not set), this sets
 // OPENBLAS_CORETYPE to KernelsForThisCpu() and starts the program again with the same `argv`;
 // the new process returns here with the right kernels. Call first thing in main(). If the
 // restart fails it returns and the program goes on with the slow kernels (doctor says so).
 void RestartWithTheRightBlasKernels(char** argv);
+
+// Whether `blas` is OpenBLAS on Prescott's kernels where this CPU runs better ones.
+bool OnSse3Fallback(const BlasInfo& blas);
 
 // Keeps freed large buffers in the heap. A point-cloud batch's activations are ~30 MB, above
 // glibc's largest mmap threshold, so every one was mapped, zero-filled and unmapped: BC ran 1.7x
