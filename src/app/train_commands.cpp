@@ -164,7 +164,9 @@ void AddDistill(CLI::App& train, int& exit_code) {
   c->add_option("--train-steps", o.train_steps, "gradient steps after each stage and round")
       ->check(CLI::PositiveNumber);
   c->add_option("--eval-episodes", o.eval_episodes,
-                "the student's episodes in the twin after each stage (0: none)");
+                "episodes scoring the last stage's student in the twin (earlier students are "
+                "scored on the next DAgger round's episodes; the best is kept; 0: no scoring, "
+                "keep the last)");
   c->add_option("--real-weight", o.real_weight,
                 "the real demos' share of each batch relative to each sim source's (1: equal)")
       ->check(CLI::Range(1e-3, 1e3));

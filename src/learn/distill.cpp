@@ -275,6 +275,31 @@ Batch MakeBatch(const std::vector<const DistillSource*>& sources,
 
 }  // namespace
 
+std::vector<DistillStage> DistillStages(const DistillOptions& o) {
+  std::vector<DistillStage> stages = {
+      {"synthetic", o.synthetic_episodes, o.level, false, false},
+      {"rendered", o.rendered_episodes, o.level, true, false},
+      {"distractors", o.distractor_episodes, std::max(o.level, 2), true, false}};
+  for (int r = 0; r < o.dagger_rounds; ++r)
+    stages.push_back({"dagger" + std::to_string(r + 1), o.dagger_episodes, o.level, true, true});
+  return stages;
+}
+
+DistillRollout DistillStageRollout(const DistillOptions& o, std::size_t k) {
+  const DistillStage stage = DistillStages(o).at(k);
+  DistillRollout rollout;
+  rollout.level = stage.level;
+  rollout.rendered = stage.rendered;
+  rollout.keep_failures = stage.dagger;
+  rollout.sample = stage.dagger ? o.student_sample : o.teacher_sample;
+  rollout.scene_points = o.scene_points;
+  rollout.arm_points = o.arm_points;
+  rollout.student_points = o.sampling.n;
+  rollout.seed = core::MixSeed(o.seed, 0x5747 + k);
+  rollout.threads = o.threads;
+  return rollout;
+}
+
 DistillReport TrainDistill(const std::filesystem::path& teacher_path,
                            std::shared_ptr<const sim::Task> task, const std::filesystem::path& real,
                            const std::filesystem::path& out, const DistillOptions& options,
@@ -332,40 +357,48 @@ DistillReport TrainDistill(const std::filesystem::path& teacher_path,
   if (!curve) throw core::IoError("cannot write " + report.curve.string());
   curve << "stage,episodes,successes,kept,steps,loss,student_success,seconds\n";
 
-  struct Stage {
-    std::string name;
-    int episodes, level;
-    bool rendered, dagger;
-  };
-  std::vector<Stage> stages = {
-      {"synthetic", options.synthetic_episodes, options.level, false, false},
-      {"rendered", options.rendered_episodes, options.level, true, false},
-      {"distractors", options.distractor_episodes, std::max(options.level, 2), true, false}};
-  for (int r = 0; r < options.dagger_rounds; ++r)
-    stages.push_back(
-        {"dagger" + std::to_string(r + 1), options.dagger_episodes, options.level, true, true});
+  const std::vector<DistillStage> stages = DistillStages(options);
+  std::size_t last = stages.size();  // the last stage that runs
+  for (std::size_t k = 0; k < stages.size(); ++k)
+    if (stages[k].episodes > 0) last = k;
+  const bool select = options.eval_episodes > 0;
 
+  // A stage's row goes to the curve once its student is scored (or cannot be).
+  auto finish_row = [&](const DistillStageReport& sr) {
+    curve << sr.name << "," << sr.episodes << "," << sr.successes << "," << sr.kept << ","
+          << sr.steps << "," << sr.loss << "," << sr.student << "," << sr.seconds << "\n"
+          << std::flush;
+  };
   double best = -1;
-  bool saved = false;
+  auto score = [&](DistillStageReport& sr, double rate, const std::string& how) {
+    sr.student = rate;
+    spdlog::info("distill: {}: the student succeeds {}% in the twin ({})", sr.name,
+                 int(std::lround(100 * rate)), how);
+    if (rate > best) {
+      best = rate;
+      SavePolicy(student, out);
+    }
+  };
+  bool pending = false;  // report.stages.back() awaits its score
   bool trained = false;  // some stage had data to train on
   for (std::size_t k = 0; k < stages.size(); ++k) {
-    const Stage& stage = stages[k];
+    const DistillStage& stage = stages[k];
     if (stage.episodes == 0) continue;
     const auto stage_start = core::Clock::now();
-    DistillRollout rollout;
-    rollout.level = stage.level;
-    rollout.rendered = stage.rendered;
-    rollout.keep_failures = stage.dagger;
-    rollout.sample = stage.dagger ? options.student_sample : options.teacher_sample;
-    rollout.scene_points = options.scene_points;
-    rollout.arm_points = options.arm_points;
-    rollout.student_points = options.sampling.n;
-    rollout.seed = core::MixSeed(options.seed, 0x5747 + k);
-    rollout.threads = options.threads;
     student->eval();
     DistillCollection got = CollectDistill(teacher, stage.dagger ? &student : nullptr, task,
-                                           rollout, 0, stage.episodes);
+                                           DistillStageRollout(options, k), 0, stage.episodes);
     student->train();
+    // The student acting in a DAgger round is the one the stage before trained: its episodes
+    // score it.
+    if (pending) {
+      DistillStageReport& before = report.stages.back();
+      if (stage.dagger && select)
+        score(before, double(got.successes) / got.episodes,
+              fmt::format("{} of {} episodes of {}", got.successes, got.episodes, stage.name));
+      finish_row(before);
+      pending = false;
+    }
     DistillStageReport sr;
     sr.name = stage.name;
     sr.episodes = got.episodes;
@@ -414,29 +447,25 @@ DistillReport TrainDistill(const std::filesystem::path& teacher_path,
       }
     }
     sr.loss = recent_n ? recent / recent_n : NAN;
-    if (options.eval_episodes > 0) {
+    spdlog::info("distill: {}: loss {:.3f}", stage.name, sr.loss);
+    report.stages.push_back(sr);
+    if (k == last && select) {
       PolicyEvalOptions eval;
       eval.episodes = options.eval_episodes;
       eval.level = options.level;
       eval.seed = options.eval_seed;
       eval.threads = options.threads;
       eval.sample = options.student_sample;
-      sr.student = EvaluatePolicy(student, task, eval).success_rate();
+      const double rate = EvaluatePolicy(student, task, eval).success_rate();
       student->train();
-      if (sr.student > best) {
-        best = sr.student;
-        SavePolicy(student, out);
-        saved = true;
-      }
+      score(report.stages.back(), rate,
+            fmt::format("{} evaluation episodes of its own", options.eval_episodes));
     }
-    sr.seconds = core::SecondsSince(stage_start);
-    curve << sr.name << "," << sr.episodes << "," << sr.successes << "," << sr.kept << ","
-          << sr.steps << "," << sr.loss << "," << sr.student << "," << sr.seconds << "\n"
-          << std::flush;
-    spdlog::info("distill: {}: loss {:.3f}, student success in the twin {}", stage.name, sr.loss,
-                 sr.student < 0 ? std::string("(not evaluated)")
-                                : std::to_string(int(std::lround(100 * sr.student))) + "%");
-    report.stages.push_back(sr);
+    report.stages.back().seconds = core::SecondsSince(stage_start);
+    if (k == last)
+      finish_row(report.stages.back());
+    else
+      pending = true;
     if (progress) progress->Advance(1, stage.name);
   }
   if (report.stages.empty()) throw core::ConfigError("train distill", "episodes", "no stage ran");
@@ -444,7 +473,7 @@ DistillReport TrainDistill(const std::filesystem::path& teacher_path,
     throw core::Error(
         "distill: no data to train on: the teacher succeeded in none of its episodes, there are "
         "no real demos and no DAgger round ran");
-  if (!saved) SavePolicy(student, out);
+  if (best < 0) SavePolicy(student, out);  // nothing scored: the last student
   report.seconds = core::SecondsSince(start);
   return report;
 }

@@ -85,4 +85,13 @@ DistillCollection CollectDistill(PolicyNet& teacher, PolicyNet* actor,
                                  std::shared_ptr<const sim::Task> task,
                                  const DistillRollout& options, int64_t first, int64_t count);
 
+// TrainDistill's stages in order (a stage of 0 episodes is skipped), and the rollout of stage k.
+struct DistillStage {
+  std::string name;
+  int episodes = 0, level = 1;
+  bool rendered = true, dagger = false;
+};
+std::vector<DistillStage> DistillStages(const DistillOptions& options);
+DistillRollout DistillStageRollout(const DistillOptions& options, std::size_t k);
+
 }  // namespace twinforge::learn

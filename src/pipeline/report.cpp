@@ -267,7 +267,9 @@ std::filesystem::path WriteReport(const std::filesystem::path& root) {
         h << (i ? "<td>" : "<th>") << core::EscapeXml(cell) << (i ? "</td>" : "</th>");
       h << "</tr>";
     }
-    h << "</table><p>student_success: the student's success in the twin after the stage.</p>\n";
+    h << "</table><p>student_success: the success in the twin of the student the stage trained, on "
+         "the next DAgger round's episodes (the last stage's on evaluation episodes of its own); "
+         "-1: not scored.</p>\n";
   }
 
   h << "<h2>Frames</h2>\n";
