@@ -379,7 +379,6 @@ DistillReport TrainDistill(const std::filesystem::path& teacher_path,
       SavePolicy(student, out);
     }
   };
-  bool pending = false;  // report.stages.back() awaits its score
   bool trained = false;  // some stage had data to train on
   for (std::size_t k = 0; k < stages.size(); ++k) {
     const DistillStage& stage = stages[k];
@@ -389,15 +388,14 @@ DistillReport TrainDistill(const std::filesystem::path& teacher_path,
     DistillCollection got = CollectDistill(teacher, stage.dagger ? &student : nullptr, task,
                                            DistillStageRollout(options, k), 0, stage.episodes);
     student->train();
-    // The student acting in a DAgger round is the one the stage before trained: its episodes
-    // score it.
-    if (pending) {
+    // The stage before's row awaits its score (only the last stage's is written at once). The
+    // student acting in a DAgger round is the one that stage trained: its episodes score it.
+    if (!report.stages.empty()) {
       DistillStageReport& before = report.stages.back();
       if (stage.dagger && select)
         score(before, double(got.successes) / got.episodes,
               fmt::format("{} of {} episodes of {}", got.successes, got.episodes, stage.name));
       finish_row(before);
-      pending = false;
     }
     DistillStageReport sr;
     sr.name = stage.name;
@@ -462,10 +460,7 @@ DistillReport TrainDistill(const std::filesystem::path& teacher_path,
             fmt::format("{} evaluation episodes of its own", options.eval_episodes));
     }
     report.stages.back().seconds = core::SecondsSince(stage_start);
-    if (k == last)
-      finish_row(report.stages.back());
-    else
-      pending = true;
+    if (k == last) finish_row(report.stages.back());
     if (progress) progress->Advance(1, stage.name);
   }
   if (report.stages.empty()) throw core::ConfigError("train distill", "episodes", "no stage ran");
