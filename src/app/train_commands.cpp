@@ -419,6 +419,8 @@ void AddTrainCommands(CLI::App& parent, int& exit_code) {
       "bench", "PPO update and point-cloud BC throughput vs this machine's matmul peak (JSON)");
   bench->add_option("--repeats", bench_options->repeats, "runs per measurement (median)")
       ->check(CLI::PositiveNumber);
+  bench->add_option("--points", bench_options->cloud_points, "points per cloud in the BC step")
+      ->check(CLI::Range(16, 8192));
   bench->callback([bench_options, &exit_code] {
     std::cout << learn::RunLearnBench(*bench_options).dump(2) << "\n";
     exit_code = 0;

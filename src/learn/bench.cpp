@@ -91,10 +91,11 @@ nlohmann::json RunLearnBench(const LearnBenchOptions& options) {
                          {"share_of_matmul_peak", samples * flops / 1e9 / peak}};
   }
 
-  // Point-cloud BC step: DP3-style encoder on 512 points, batch 64, Adam.
+  // Point-cloud BC step: DP3-style encoder, batch 64, Adam.
   {
     torch::manual_seed(2);
     PolicyConfig config;
+    config.points = options.cloud_points;
     PolicyNet net(config);
     torch::optim::Adam optimizer(net->parameters(), torch::optim::AdamOptions(1e-3));
     const int64_t B = options.cloud_batch;

@@ -10,7 +10,8 @@ struct LearnBenchOptions {
   int repeats = 5;     // runs per measurement; medians are reported
   int state_dim = 32;  // RialTo's teacher: obs 32 -> [256, 256] -> 14 logits + value head
   int minibatch = 4096;
-  int cloud_batch = 64;  // DP3-style encoder, 512 points
+  int cloud_batch = 64;    // DP3-style encoder
+  int cloud_points = 512;  // points per cloud (the policies' default)
 };
 
 // The machine's matmul peak in GFLOP/s: the median of `repeats` runs of four square 1024

@@ -58,7 +58,7 @@ struct DistillOptions {
   // for the few thousand steps a CPU budget allows.
   double learning_rate = 1e-3;
   double grad_clip = 5.0;
-  PointSampling sampling;  // the student's points and their augmentation
+  PointSampling sampling;  // the student's points (config key "points": n) and their augmentation
   // Camera-pose augmentation: each training sample's scene points (not the arm's, which come
   // from forward kinematics on the robot too) moved rigidly, as a camera a little off its
   // calibration would see them. Shift: per axis, standard deviation in m; tilt: about a random
@@ -100,6 +100,7 @@ struct DistillOptions {
     a("scene_tilt_deg", scene_tilt_deg);
     a("scene_points", scene_points);
     a("arm_points", arm_points);
+    a("points", sampling.n);
     a("eval_episodes", eval_episodes);
     a("eval_seed", eval_seed);
     a("threads", threads);
@@ -110,6 +111,7 @@ struct DistillOptions {
     a.Require(train_steps > 0 && batch > 0 && hidden > 0 && threads > 0, "train_steps",
               "positive step, batch, layer and thread counts");
     a.Require(scene_points > 0 && arm_points > 0, "scene_points", "positive point counts");
+    a.Require(sampling.n >= 16 && sampling.n <= 8192, "points", "16..8192 points the student sees");
     a.Require(level >= 0 && level <= 3, "level", "a randomization level 0..3");
     a.Require(real_weight > 0 && real_weight <= 1e3, "real_weight",
               "a positive weight (1: an equal share; use --no-co-train for none)");

@@ -70,5 +70,22 @@ TEST(RunConfigs, TheShippedOnesLoad) {
   EXPECT_GT(mug.rl_bc_pretrain_steps, 0);
 }
 
+// The points the student sees are a run option, checked like the others.
+TEST(RunConfigs, TheStudentsPointCountIsAnOption) {
+  const auto o = core::ReadConfig<MainJobOptions>(
+      core::ParseConfigText("distill:\n  points: 256\n", "run.yaml"));
+  EXPECT_EQ(o.distill.sampling.n, 256);
+  EXPECT_EQ(core::ReadConfig<MainJobOptions>(core::ParseConfigText("task: open_drawer\n", "r.yaml"))
+                .distill.sampling.n,
+            512);
+  try {
+    core::ReadConfig<MainJobOptions>(core::ParseConfigText("distill:\n  points: 4\n", "run.yaml"));
+    FAIL() << "4 points accepted";
+  } catch (const core::ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("points"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("run.yaml"), std::string::npos) << e.what();
+  }
+}
+
 }  // namespace
 }  // namespace twinforge::pipeline
