@@ -291,12 +291,16 @@ class Job {
                        {"update_samples_per_s", r.update_samples_per_s},
                        {"update_share_of_matmul_peak", r.update_share_of_matmul_peak}});
           });
+    core::Json distill_options = core::ToJson(o_.distill);
+    // Runs made before the student's point count was an option (stop 70) keep their fingerprint
+    // at the default count, so updating does not redo their distillation.
+    if (o_.distill.sampling.n == learn::PointSampling{}.n) distill_options.erase("points");
     Fingerprint distill_inputs;
     distill_inputs.Add(twin_hash)
         .Add(physics)
         .AddFile(run_ / "policies/teacher.pt")
         .AddFile(run_ / "demos/real.hdf5")
-        .Add(core::ToJson(o_.distill).dump());
+        .Add(distill_options.dump());
     if (!o_.co_train) distill_inputs.Add("sim only");  // co-trained runs keep their fingerprint
     Stage("distill", distill_inputs.Hex(), {"policies/student.pt"}, [&] {
       learn::DistillOptions d = o_.distill;
