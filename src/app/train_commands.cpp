@@ -17,8 +17,10 @@
 #include "sim/task.h"
 
 namespace twinforge::app {
-
 namespace {
+
+// The point counts a policy may be given (`--points` of bc, distill and bench).
+const CLI::Range kPointCountRange(learn::PointSampling::kMinN, learn::PointSampling::kMaxN);
 
 struct BcCli {
   std::string demos, out;
@@ -171,7 +173,7 @@ void AddDistill(CLI::App& train, int& exit_code) {
                 "the real demos' share of each batch relative to each sim source's (1: equal)")
       ->check(CLI::Range(1e-3, 1e3));
   c->add_option("--lr", o.learning_rate, "AdamW learning rate")->check(CLI::Range(1e-6, 1.0));
-  c->add_option("--points", o.sampling.n, "points the student sees")->check(CLI::Range(16, 8192));
+  c->add_option("--points", o.sampling.n, "points the student sees")->check(kPointCountRange);
   c->add_option("--level", o.level, "randomization level 0..3")->check(CLI::Range(0, 3));
   c->add_option("--seed", o.seed, "seed");
   c->add_option("--threads", o.threads, "worker threads")->check(CLI::PositiveNumber);
@@ -378,7 +380,7 @@ void AddTrainCommands(CLI::App& parent, int& exit_code) {
   bc->add_option("--out", cli->out, "policy file to write; its loss curve goes beside it (.csv)")
       ->required();
   bc->add_option("--points", cli->options.sampling.n, "points per observation")
-      ->check(CLI::Range(16, 8192));
+      ->check(kPointCountRange);
   bc->add_option("--epochs", cli->options.max_epochs, "at most this many epochs")
       ->check(CLI::PositiveNumber);
   bc->add_option("--patience", cli->options.patience,
@@ -420,7 +422,7 @@ void AddTrainCommands(CLI::App& parent, int& exit_code) {
   bench->add_option("--repeats", bench_options->repeats, "runs per measurement (median)")
       ->check(CLI::PositiveNumber);
   bench->add_option("--points", bench_options->cloud_points, "points per cloud in the BC step")
-      ->check(CLI::Range(16, 8192));
+      ->check(kPointCountRange);
   bench->callback([bench_options, &exit_code] {
     std::cout << learn::RunLearnBench(*bench_options).dump(2) << "\n";
     exit_code = 0;

@@ -16,6 +16,7 @@ namespace twinforge::learn {
 // [drop_min, drop_max] of the points dropped, then each jittered by Gaussian noise. The points
 // are drawn as sim::ResamplePoints draws them: each once before any twice.
 struct PointSampling {
+  static constexpr int kMinN = 16, kMaxN = 8192;  // the counts a policy may be given
   int n = 512;
   double drop_min = 0.1, drop_max = 0.3;
   double jitter = 0.002;  // m

@@ -111,7 +111,8 @@ struct DistillOptions {
     a.Require(train_steps > 0 && batch > 0 && hidden > 0 && threads > 0, "train_steps",
               "positive step, batch, layer and thread counts");
     a.Require(scene_points > 0 && arm_points > 0, "scene_points", "positive point counts");
-    a.Require(sampling.n >= 16 && sampling.n <= 8192, "points", "16..8192 points the student sees");
+    a.Require(sampling.n >= PointSampling::kMinN && sampling.n <= PointSampling::kMaxN, "points",
+              "16..8192 points the student sees");
     a.Require(level >= 0 && level <= 3, "level", "a randomization level 0..3");
     a.Require(real_weight > 0 && real_weight <= 1e3, "real_weight",
               "a positive weight (1: an equal share; use --no-co-train for none)");
