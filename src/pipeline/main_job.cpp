@@ -48,7 +48,14 @@ int ReadSuccesses(const std::filesystem::path& report) {
 class Job {
  public:
   Job(const MainJobOptions& options, const std::filesystem::path& out)
-      : o_(options), run_(out), task_(sim::LoadTaskSpec(options.task)) {}
+      : o_(options), run_(out), task_(sim::LoadTaskSpec(options.task)) {
+    // Every stage works on the run's threads.
+    if (o_.distill.threads != learn::DistillOptions{}.threads && o_.distill.threads != o_.threads)
+      spdlog::warn(
+          "run: distill.threads ({}) is not used; distillation works on the run's threads ({}): "
+          "set `threads` (or --threads) instead",
+          o_.distill.threads, o_.threads);
+  }
 
   void Run() {
     core::SaveConfig(run_ / "config.json", o_);
@@ -291,16 +298,12 @@ class Job {
                        {"update_samples_per_s", r.update_samples_per_s},
                        {"update_share_of_matmul_peak", r.update_share_of_matmul_peak}});
           });
-    core::Json distill_options = core::ToJson(o_.distill);
-    // Runs made before the student's point count was an option (stop 70) keep their fingerprint
-    // at the default count, so updating does not redo their distillation.
-    if (o_.distill.sampling.n == learn::PointSampling{}.n) distill_options.erase("points");
     Fingerprint distill_inputs;
     distill_inputs.Add(twin_hash)
         .Add(physics)
         .AddFile(run_ / "policies/teacher.pt")
         .AddFile(run_ / "demos/real.hdf5")
-        .Add(distill_options.dump());
+        .Add(DistillFingerprintOptions(o_));
     if (!o_.co_train) distill_inputs.Add("sim only");  // co-trained runs keep their fingerprint
     Stage("distill", distill_inputs.Hex(), {"policies/student.pt"}, [&] {
       learn::DistillOptions d = o_.distill;
@@ -415,6 +418,17 @@ class Job {
 };
 
 }  // namespace
+
+std::string DistillFingerprintOptions(const MainJobOptions& options) {
+  core::Json distill = core::ToJson(options.distill);
+  // Threads do not change the student (it is the same on any number), so they are hashed at the
+  // default: a run on other threads keeps its distillation, as runs before stop 71 did.
+  distill["threads"] = learn::DistillOptions{}.threads;
+  // Runs made before the student's point count was an option (stop 70) keep their fingerprint
+  // at the default count, so updating does not redo their distillation.
+  if (options.distill.sampling.n == learn::PointSampling{}.n) distill.erase("points");
+  return distill.dump();
+}
 
 void RunMainJob(const MainJobOptions& options, const std::filesystem::path& out) {
   Job(options, out).Run();

@@ -150,6 +150,10 @@ struct MainJobOptions {
 // before it stay recorded.
 void RunMainJob(const MainJobOptions& options, const std::filesystem::path& out);
 
+// The distillation options as the distill stage's fingerprint hashes them: what changes the
+// student, in the form runs before stops 70-71 hashed at the defaults.
+std::string DistillFingerprintOptions(const MainJobOptions& options);
+
 // Writes out/eval/report.html from whatever the run directory holds.
 std::filesystem::path WriteReport(const std::filesystem::path& out);
 

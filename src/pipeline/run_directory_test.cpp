@@ -87,5 +87,20 @@ TEST(RunConfigs, TheStudentsPointCountIsAnOption) {
   }
 }
 
+TEST(RunConfigs, DistillationIsRedoneForWhatChangesTheStudentOnly) {
+  const auto options = [](const std::string& text) {
+    return DistillFingerprintOptions(
+        core::ReadConfig<MainJobOptions>(core::ParseConfigText(text, "run.yaml")));
+  };
+  const std::string defaults = options("task: open_drawer\n");
+  // The form runs made before stop 70 hashed: no point count at the default.
+  EXPECT_EQ(defaults.find("\"points\""), std::string::npos) << defaults;
+  // Threads: the student is the same on any number (and a run's own `threads` set them).
+  EXPECT_EQ(options("threads: 1\n"), defaults);
+  EXPECT_EQ(options("distill:\n  threads: 1\n"), defaults);
+  EXPECT_NE(options("distill:\n  points: 256\n"), defaults);
+  EXPECT_NE(options("distill:\n  seed: 2\n"), defaults);
+}
+
 }  // namespace
 }  // namespace twinforge::pipeline
