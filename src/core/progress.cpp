@@ -54,8 +54,14 @@ std::string Progress::Line() const {
     std::snprintf(buffer, sizeof buffer, " (%.0f%%)", 100.0 * done_ / total_);
     line += buffer;
   }
-  std::snprintf(buffer, sizeof buffer, "  %.1f/s", r);
-  line += buffer;
+  // Work that takes seconds a unit (a distillation stage, a calibration frame) reads as the time
+  // each takes rather than as "0.0/s".
+  if (r >= 1.0 || r == 0.0) {
+    std::snprintf(buffer, sizeof buffer, "  %.1f/s", r);
+    line += buffer;
+  } else {
+    line += "  " + FormatDuration(1.0 / r) + " each";
+  }
   line += "  elapsed " + FormatDuration(elapsed_seconds());
   if (total_ > 0 && r > 0 && done_ < total_)
     line += "  ETA " + FormatDuration((total_ - done_) / r);

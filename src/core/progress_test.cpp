@@ -20,6 +20,17 @@ TEST(Progress, LineShowsStageStepRateAndEta) {
   EXPECT_GT(progress.rate(), 0.0);
 }
 
+TEST(Progress, SlowWorkShowsTheTimeEachUnitTakes) {
+  Progress progress("distill", 13, "stages");
+  progress.set_interactive(false);
+  std::this_thread::sleep_for(std::chrono::milliseconds(2100));
+  progress.Advance(1);
+  const std::string line = progress.Line();
+  EXPECT_NE(line.find("  0:02 each"), std::string::npos) << line;
+  EXPECT_EQ(line.find("/s"), std::string::npos) << line;
+  EXPECT_NE(line.find("ETA 0:2"), std::string::npos) << line;  // 12 more, about 2 s each
+}
+
 TEST(Progress, UnknownTotalHasNoEta) {
   Progress progress("scan", 0, "frames");
   progress.set_interactive(false);
