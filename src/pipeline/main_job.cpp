@@ -421,8 +421,9 @@ class Job {
 
 std::string DistillFingerprintOptions(const MainJobOptions& options) {
   core::Json distill = core::ToJson(options.distill);
-  // Threads do not change the student (it is the same on any number), so they are hashed at the
-  // default: a run on other threads keeps its distillation, as runs before stop 71 did.
+  // Threads do not change the student (it is the same on any number, and a run uses its own
+  // `threads`), so distill.threads is hashed at its default: setting it redoes nothing, and a
+  // run that never set it hashes what it always did.
   distill["threads"] = learn::DistillOptions{}.threads;
   // Runs made before the student's point count was an option (stop 70) keep their fingerprint
   // at the default count, so updating does not redo their distillation.
