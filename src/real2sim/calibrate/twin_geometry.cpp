@@ -63,7 +63,6 @@ void TwinGeometry::RayCast(const std::array<double, 7>& q, double gripper_width,
 
 RasterMesh TwinGeometry::Posed(const std::array<double, 7>& q, double gripper_width,
                                const GeomColor& color, const std::function<bool(int geom)>& keep) {
-  const mjModel* m = env_.model();
   const mjData* d = env_.data();
   PoseArm(q, gripper_width);
   const core::Pose to_base = env_.base().Inverse();
