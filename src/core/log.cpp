@@ -27,6 +27,13 @@ std::shared_ptr<spdlog::logger> Logger() {
   }
   return logger;
 }
+
+// A run's log file is written through as each line comes (a run logs a few hundred), so a
+// `tail -f` sees it live and a killed run's last lines are there; the console alone flushes on
+// warnings, as stderr writes through anyway.
+spdlog::level::level_enum FlushLevel() {
+  return g_file_sink ? spdlog::level::trace : spdlog::level::warn;
+}
 }  // namespace
 
 void SetupLogging(const std::string& level) {
@@ -40,7 +47,7 @@ void SetupLogging(const std::string& level) {
   // The console shows `level`; a run's log file (AttachLogFile) keeps debug lines as well.
   g_console_sink->set_level(parsed);
   logger->set_level(g_file_sink ? std::min(parsed, spdlog::level::debug) : parsed);
-  logger->flush_on(spdlog::level::warn);
+  logger->flush_on(FlushLevel());
 }
 
 void AttachLogFile(const std::filesystem::path& path) {
@@ -62,6 +69,7 @@ void AttachLogFile(const std::filesystem::path& path) {
   g_file_sink->set_level(spdlog::level::debug);
   logger->sinks().push_back(g_file_sink);
   logger->set_level(std::min(logger->level(), spdlog::level::debug));
+  logger->flush_on(FlushLevel());
 }
 
 void DetachLogFile() {
@@ -73,6 +81,7 @@ void DetachLogFile() {
   sinks.erase(std::remove(sinks.begin(), sinks.end(), g_file_sink), sinks.end());
   g_file_sink.reset();
   logger->set_level(g_console_sink->level());
+  logger->flush_on(FlushLevel());
 }
 
 }  // namespace twinforge::core
