@@ -63,7 +63,8 @@ std::string Progress::Line() const {
     line += "  " + FormatDuration(1.0 / r) + " each";
   }
   line += "  elapsed " + FormatDuration(elapsed_seconds());
-  if (total_ > 0 && r > 0 && done_ < total_)
+  // Work that ended short of its total (BC stopping early) has nothing left to wait for.
+  if (total_ > 0 && r > 0 && done_ < total_ && !finished_)
     line += "  ETA " + FormatDuration((total_ - done_) / r);
   if (!note_.empty()) line += "  " + note_;
   return line;

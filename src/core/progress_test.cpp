@@ -31,6 +31,18 @@ TEST(Progress, SlowWorkShowsTheTimeEachUnitTakes) {
   EXPECT_NE(line.find("ETA 0:2"), std::string::npos) << line;  // 12 more, about 2 s each
 }
 
+TEST(Progress, WorkThatEndsEarlyHasNoEtaWhenDone) {
+  Progress progress("bc", 300, "epochs");
+  progress.set_interactive(false);
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  progress.Advance(84);  // early stopping
+  EXPECT_NE(progress.Line().find("ETA"), std::string::npos) << progress.Line();
+  progress.Finish("valid loss 1.9");
+  const std::string line = progress.Line();
+  EXPECT_EQ(line.find("ETA"), std::string::npos) << line;
+  EXPECT_NE(line.find("84/300 epochs (28%)"), std::string::npos) << line;
+}
+
 TEST(Progress, UnknownTotalHasNoEta) {
   Progress progress("scan", 0, "frames");
   progress.set_interactive(false);
