@@ -3,20 +3,12 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
-#include <fstream>
-#include <sstream>
 
+#include "core/fs.h"
 #include "core/test_support.h"
 
 namespace twinforge::core {
 namespace {
-
-std::string Read(const std::filesystem::path& path) {
-  std::ifstream in(path);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
 
 int Count(const std::string& text, const std::string& what) {
   int n = 0;
@@ -32,7 +24,7 @@ TEST(Plot, WritesOneLinePerSeriesAndSkipsGaps) {
   a.series.push_back({"eval & co", {0, 3}, {0.1, 0.9}});
   PlotPanel b{"vs time", "minutes", "success", {{"train", {0, 1}, {0, 1}}}, false};
   WriteSvgPlot(dir / "curve.svg", {a, b});
-  const std::string svg = Read(dir / "curve.svg");
+  const std::string svg = ReadTextFile(dir / "curve.svg");
   EXPECT_EQ(svg.rfind("<svg", 0), 0u);
   EXPECT_EQ(Count(svg, "<path"), 3);
   EXPECT_NE(svg.find("success &lt;vs&gt; steps"), std::string::npos);
