@@ -22,17 +22,13 @@ std::shared_ptr<spdlog::logger> Logger() {
     console->set_pattern("[%H:%M:%S] %^%l%$ %v");
     g_console_sink = console;
     logger = std::make_shared<spdlog::logger>("twinforge", console);
+    // Every line is flushed: a run's log file (a few hundred lines) is then written through, so
+    // `tail -f` sees it live and a killed run's last lines are there; stderr writes through anyway.
+    logger->flush_on(spdlog::level::trace);
     spdlog::register_logger(logger);
     spdlog::set_default_logger(logger);
   }
   return logger;
-}
-
-// A run's log file is written through as each line comes (a run logs a few hundred), so a
-// `tail -f` sees it live and a killed run's last lines are there; the console alone flushes on
-// warnings, as stderr writes through anyway.
-spdlog::level::level_enum FlushLevel() {
-  return g_file_sink ? spdlog::level::trace : spdlog::level::warn;
 }
 }  // namespace
 
@@ -47,7 +43,6 @@ void SetupLogging(const std::string& level) {
   // The console shows `level`; a run's log file (AttachLogFile) keeps debug lines as well.
   g_console_sink->set_level(parsed);
   logger->set_level(g_file_sink ? std::min(parsed, spdlog::level::debug) : parsed);
-  logger->flush_on(FlushLevel());
 }
 
 void AttachLogFile(const std::filesystem::path& path) {
@@ -69,7 +64,6 @@ void AttachLogFile(const std::filesystem::path& path) {
   g_file_sink->set_level(spdlog::level::debug);
   logger->sinks().push_back(g_file_sink);
   logger->set_level(std::min(logger->level(), spdlog::level::debug));
-  logger->flush_on(FlushLevel());
 }
 
 void DetachLogFile() {
@@ -81,7 +75,6 @@ void DetachLogFile() {
   sinks.erase(std::remove(sinks.begin(), sinks.end(), g_file_sink), sinks.end());
   g_file_sink.reset();
   logger->set_level(g_console_sink->level());
-  logger->flush_on(FlushLevel());
 }
 
 }  // namespace twinforge::core
