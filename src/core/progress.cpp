@@ -41,7 +41,8 @@ double Progress::elapsed_seconds() const {
 
 double Progress::rate() const {
   const double t = elapsed_seconds();
-  return t > 0 && done_ > 0 ? done_ / t : 0.0;
+  const int64_t steps = done_ - resumed_at_;
+  return t > 0 && steps > 0 ? steps / t : 0.0;
 }
 
 std::string Progress::Line() const {
@@ -76,6 +77,11 @@ void Progress::Set(int64_t done, const std::string& note) {
   done_ = done;
   if (!note.empty()) note_ = note;
   Emit(false);
+}
+
+void Progress::ResumeAt(int64_t done) {
+  resumed_at_ = done_ = done;
+  start_ = std::chrono::steady_clock::now();
 }
 
 void Progress::Emit(bool force) {

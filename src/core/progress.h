@@ -22,12 +22,15 @@ class Progress {
   void Advance(int64_t n = 1, const std::string& note = "");
   // Sets the absolute step count.
   void Set(int64_t done, const std::string& note = "");
+  // Work resumed with `done` steps already done by an earlier process (a checkpoint): they count
+  // toward the total, not toward this session's rate and ETA.
+  void ResumeAt(int64_t done);
   // Ends the line and logs a summary (called by the destructor if not before).
   void Finish(const std::string& note = "");
 
   int64_t done() const { return done_; }
   double elapsed_seconds() const;
-  // Steps per second so far (0 before the first step).
+  // Steps per second so far in this session (0 before its first step).
   double rate() const;
   // The status line as it would be printed, e.g. "rl  120/500 episodes  12.0/s  ETA 0:31".
   std::string Line() const;
@@ -43,6 +46,7 @@ class Progress {
   std::string unit_;
   double log_every_seconds_;
   int64_t done_ = 0;
+  int64_t resumed_at_ = 0;  // steps done before this session (ResumeAt)
   std::string note_;
   bool interactive_;
   bool finished_ = false;

@@ -43,6 +43,25 @@ TEST(Progress, WorkThatEndsEarlyHasNoEtaWhenDone) {
   EXPECT_NE(line.find("84/300 epochs (28%)"), std::string::npos) << line;
 }
 
+TEST(Progress, ResumedWorkRatesOnlyTheStepsThisSessionDid) {
+  Progress progress("rl", 200, "iterations");
+  progress.set_interactive(false);
+  progress.ResumeAt(150);  // a checkpoint's 150 iterations, done by an earlier process
+  std::this_thread::sleep_for(std::chrono::milliseconds(1100));
+  progress.Set(151);
+  const std::string line = progress.Line();
+  EXPECT_NE(line.find("151/200 iterations (76%)"), std::string::npos) << line;
+  // One iteration in about a second: 49 more take about 49 s, not the 0:00 that counting the
+  // checkpoint's 150 as this session's would give.
+  EXPECT_NE(line.find("  0:01 each"), std::string::npos) << line;
+  const size_t eta = line.find("ETA ");
+  ASSERT_NE(eta, std::string::npos) << line;
+  const size_t colon = line.find(':', eta);
+  const int seconds = 60 * std::stoi(line.substr(eta + 4)) + std::stoi(line.substr(colon + 1));
+  EXPECT_GE(seconds, 45) << line;
+  EXPECT_LE(seconds, 120) << line;  // a loaded machine oversleeps
+}
+
 TEST(Progress, UnknownTotalHasNoEta) {
   Progress progress("scan", 0, "frames");
   progress.set_interactive(false);

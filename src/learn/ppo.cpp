@@ -531,6 +531,7 @@ PpoReport TrainPpo(std::shared_ptr<const sim::Task> task, const std::filesystem:
     report.best_iteration = state["best_iteration"];
     for (const auto& r : state["rows"]) rows.push_back(RowFromJson(r));
     report.resumed_from = iteration;
+    if (progress) progress->ResumeAt(iteration);
     spdlog::info("rl: resuming {} at iteration {} ({} env steps)", report.checkpoint.string(),
                  iteration, env_steps);
   }
