@@ -156,7 +156,13 @@ void AddRun(CLI::App& parent, int& exit_code) {
   c->add_option("--config", cli->config,
                 "options file (YAML/JSON; config.json of an earlier run); flags override it");
   c->add_option("--demos", o.demos, "real demos to record")->check(CLI::PositiveNumber);
-  c->add_option("--rl-minutes", o.rl_minutes, "PPO + BC budget in minutes");
+  c->add_option("--rl-iterations", o.rl_iterations,
+                "PPO + BC budget in iterations (0: none); the same teacher on any machine")
+      ->check(CLI::NonNegativeNumber);
+  c->add_option("--rl-minutes", o.rl_minutes,
+                "wall-clock cap on PPO + BC (0: none); a teacher it stops depends on the "
+                "machine's speed")
+      ->check(CLI::NonNegativeNumber);
   c->add_option("--sim-demos", o.sim_demos,
                 "sim demos for RL: policy (inverse distillation of the real-demo policy) or "
                 "expert (the twin's scripted operator, for tasks whose real-demo policy never "
@@ -175,12 +181,14 @@ void AddRun(CLI::App& parent, int& exit_code) {
     if (!cli->config.empty()) {
       o = core::LoadConfig<pipeline::MainJobOptions>(cli->config);
       // Flags given on the command line win over the file.
-      for (const char* flag : {"--task", "--demos", "--rl-minutes", "--sim-demos", "--levels",
-                               "--trials", "--threads", "--seed", "--no-co-train"})
+      for (const char* flag : {"--task", "--demos", "--rl-iterations", "--rl-minutes",
+                               "--sim-demos", "--levels", "--trials", "--threads", "--seed",
+                               "--no-co-train"})
         if (c->count(flag)) {
           const std::string f = flag;
           if (f == "--task") o.task = cli->options.task;
           if (f == "--demos") o.demos = cli->options.demos;
+          if (f == "--rl-iterations") o.rl_iterations = cli->options.rl_iterations;
           if (f == "--rl-minutes") o.rl_minutes = cli->options.rl_minutes;
           if (f == "--sim-demos") o.sim_demos = cli->options.sim_demos;
           if (f == "--levels") o.levels = cli->options.levels;
@@ -191,6 +199,7 @@ void AddRun(CLI::App& parent, int& exit_code) {
         }
     }
     if (!cli->reality.address.empty()) o.reality = cli->reality.address;
+    core::Validate(o, "run's options (flags and --config)");
     const std::string task_name = sim::LoadTaskSpec(o.task).name;
     if (o.reality.empty()) o.reality = "proxy:" + task_name;
     o.token = cli->reality.token;

@@ -261,7 +261,8 @@ class Job {
               .AddFile(run_ / "demos/sim.hdf5")
               .Add(std::to_string(o_.rl_envs) + "/" + std::to_string(o_.seed) + "/" +
                    std::to_string(o_.rl_bc_coef))
-              .Add(std::to_string(o_.rl_minutes) + "/" + std::to_string(o_.rl_target))
+              .Add(std::to_string(o_.rl_minutes) + "/" + std::to_string(o_.rl_target) + "/" +
+                   std::to_string(o_.rl_iterations))
               .Add(std::to_string(o_.rl_bc_pretrain_steps) + "/" +
                    std::to_string(o_.rl_critic_warmup))
               .Hex(),
@@ -270,6 +271,7 @@ class Job {
             p.num_envs = o_.rl_envs;
             p.threads = o_.threads;
             p.seed = o_.seed;
+            p.max_iterations = o_.rl_iterations;
             p.max_seconds = 60 * o_.rl_minutes;
             p.target_success = o_.rl_target;
             p.bc_coef = o_.rl_bc_coef;
@@ -280,7 +282,7 @@ class Job {
             p.eval_sample = discrete;
             p.bc_pretrain_steps = o_.rl_bc_pretrain_steps;
             p.critic_warmup = o_.rl_critic_warmup;
-            core::Progress progress("rl", 0, "iterations");
+            core::Progress progress("rl", o_.rl_iterations, "iterations");
             const bool demos = ReadSuccesses(run_ / "demos/sim.json") > 0;
             // A checkpoint left by a killed run (or a smaller budget) resumes; one made from
             // other inputs (new sim demos, a rebuilt twin) is set aside and the teacher starts
@@ -289,6 +291,15 @@ class Job {
                                            run_ / "policies/teacher.pt", p,
                                            learn::CheckpointMode::kResumeOrStartOver, &progress);
             progress.Finish();
+            if (r.stopped_by == "seconds")
+              spdlog::warn(
+                  "rl: the teacher stopped at rl_minutes ({}) after {} iterations{}: it, and "
+                  "everything after it, depends on this machine's speed, so the same seed "
+                  "elsewhere may give another student; for a run any machine repeats, give "
+                  "rl_iterations and set rl_minutes to 0",
+                  o_.rl_minutes, r.iterations,
+                  o_.rl_iterations > 0 ? " of rl_iterations " + std::to_string(o_.rl_iterations)
+                                       : std::string());
             WriteJson(run_ / "policies/teacher.json",
                       {{"best_eval_success", r.best_eval_success},
                        {"iterations", r.iterations},
