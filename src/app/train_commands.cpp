@@ -248,12 +248,19 @@ void AddRl(CLI::App& train, int& exit_code) {
       ->check(CLI::PositiveNumber);
   c->add_option("--eval-episodes", o.eval_episodes, "episodes per evaluation")
       ->check(CLI::PositiveNumber);
-  c->add_option("--minutes", o.max_seconds, "wall-clock budget in minutes (0: none)")
+  c->add_option("--minutes", o.max_seconds,
+                "wall-clock budget in minutes (0: none); the run then depends on the machine's "
+                "speed")
       ->transform([](std::string v) { return std::to_string(std::stod(v) * 60); });
   c->add_option("--max-steps", o.max_env_steps, "env-step budget (0: none)");
-  c->add_option("--iterations", o.max_iterations, "iteration budget (0: none)");
+  c->add_option("--iterations", o.max_iterations,
+                "iteration budget (0: none); default 200, unless --minutes or --max-steps is "
+                "given alone");
   c->add_flag("--fresh", cli->fresh, "discard an existing checkpoint");
-  c->callback([cli, &exit_code] {
+  c->callback([cli, c, &exit_code] {
+    // A budget asked for alone is the budget, not a cap under the default iteration count.
+    if ((c->count("--minutes") || c->count("--max-steps")) && !c->count("--iterations"))
+      cli->options.max_iterations = 0;
     auto task = LoadTrainTask(cli->task, cli->twin, cli->controller);
     const std::string demos = cli->demos == "none" ? "" : cli->demos;
     if (!demos.empty() && !std::filesystem::exists(demos))

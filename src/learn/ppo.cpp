@@ -540,6 +540,17 @@ PpoReport TrainPpo(std::shared_ptr<const sim::Task> task, const std::filesystem:
       "{} + {} parameters",
       spec.name, options.level, N, horizon, report.demo_steps, ParameterCount(*policy),
       ParameterCount(*value));
+  {
+    std::string budget;
+    const auto add = [&](bool on, const std::string& what) {
+      if (on) budget += (budget.empty() ? "" : ", ") + what;
+    };
+    add(options.max_iterations > 0, std::to_string(options.max_iterations) + " iterations");
+    add(options.max_env_steps > 0, std::to_string(options.max_env_steps) + " env steps");
+    add(options.max_seconds > 0, fmt::format("{:.1f} min of wall clock", options.max_seconds / 60));
+    spdlog::info("rl: budget {}; target {:.2f}", budget.empty() ? "none" : budget,
+                 options.target_success);
+  }
 
   sim::VecEnvOptions vec_options;
   vec_options.num_envs = N;

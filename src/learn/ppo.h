@@ -58,9 +58,11 @@ struct PpoOptions {
   int eval_every = 10;
   int eval_episodes = 100;
   uint64_t eval_seed = 7000;
-  double max_seconds = 1200;
+  // Budgets: iterations by default, so a run is the same on any machine, thread count or load
+  // (a wall-clock budget stops where the machine's speed says).
+  double max_seconds = 0;
   int64_t max_env_steps = 0;
-  int max_iterations = 0;
+  int max_iterations = 200;
   template <class A>
   void Serialize(A& a) {
     a("num_envs", num_envs);
