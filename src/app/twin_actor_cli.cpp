@@ -61,6 +61,13 @@ void TwinActorCli::Add(CLI::App* c) {
                 "twin actor: m an object must be found from where it was believed to count as "
                 "moved at the look when blocked (the belief is already known to be off there)")
       ->check(CLI::PositiveNumber);
+  c->add_flag("--look-when-unseen,!--no-look-when-unseen", relook.look_when_unseen,
+              "twin actor: when the first look does not see an object (hidden, out of view), "
+              "look again at once if looks remain (default on)");
+  c->add_flag("--occluders,!--no-occluders", relook.occluders,
+              "twin actor: tell each look what the trial's earlier frames showed that no object "
+              "explains (clutter, a panel the twin has elsewhere), so an active look chooses "
+              "around it (default on)");
   c->add_option("--max-move", relook.max_move,
                 "twin actor: m beyond which an object found is taken for a misfit (clutter taken "
                 "for it), not a push, and ignored")
@@ -129,6 +136,8 @@ TwinActorOnRobot::TwinActorOnRobot(reality::Robot& robot, const sim::TaskSpec& t
   if (cli.relook.measure_reach) header_["measure_reach"] = true;
   header_["look_when_blocked"] = cli.relook.look_when_blocked;
   header_["moved_when_blocked"] = cli.relook.moved_when_blocked;
+  header_["look_when_unseen"] = cli.relook.look_when_unseen;
+  header_["occluders"] = cli.relook.occluders;
   header_["capture"] = {capture.width, capture.height};
 }
 

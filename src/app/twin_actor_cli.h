@@ -27,7 +27,8 @@ struct TwinActorCli {
   samrl::RelookOptions relook;
 
   // --actor, --actor-policy, --look, --q, --register-to, --capture-scale, --settle, --max-looks,
-  // --moved, --max-move.
+  // --moved, --look-when-blocked, --moved-when-blocked, --look-when-unseen, --occluders,
+  // --max-move.
   void Add(CLI::App* command);
   // Throws when the options disagree, with each other or with `policy` (the --policy file:
   // needed by --actor policy, refused by --actor twin; --q goes with --look q); `command` names

@@ -9,8 +9,9 @@
 namespace twinforge::reality {
 namespace {
 
-const char* const kWorlds[] = {"open_drawer",   "open_cabinet",           "mug_on_shelf",
-                               "peg_insertion", "peg_insertion_occluded", "spatula_flipping"};
+const char* const kWorlds[] = {"open_drawer",     "open_cabinet",           "mug_on_shelf",
+                               "peg_insertion",   "peg_insertion_occluded", "peg_insertion_hidden",
+                               "spatula_flipping"};
 
 class World : public ::testing::TestWithParam<const char*> {};
 

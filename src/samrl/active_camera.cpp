@@ -146,11 +146,14 @@ OrbitMount ObjectsMount(const sim::Task& twin) {
   for (int body : twin.index().object_bodies) mount.center += env.BodyPose(body).translation;
   if (!twin.index().object_bodies.empty())
     mount.center /= double(twin.index().object_bodies.size());
+  const sim::CameraSpec& camera = twin.spec().camera;
+  const std::array<double, 2> azimuth = camera.mount_azimuth.value_or(std::array{-2.5, 2.5});
+  const std::array<double, 2> elevation = camera.mount_elevation.value_or(std::array{0.8, 1.3});
   mount.radius = 0.6;
-  mount.min_azimuth = -2.5;
-  mount.max_azimuth = 2.5;
-  mount.min_elevation = 0.8;
-  mount.max_elevation = 1.3;
+  mount.min_azimuth = azimuth[0];
+  mount.max_azimuth = azimuth[1];
+  mount.min_elevation = elevation[0];
+  mount.max_elevation = elevation[1];
   return mount;
 }
 
@@ -188,7 +191,8 @@ core::Pose BestFixedView(real2sim::TwinGeometry& twin, const sim::Task& task,
 TargetView BelievedView(real2sim::TwinGeometry& twin, const std::array<double, 7>& q,
                         double gripper_width,
                         const std::vector<std::pair<std::string, core::Pose>>& objects,
-                        const std::string& held, const std::vector<std::string>& targets) {
+                        const std::string& held, const std::vector<std::string>& targets,
+                        const std::vector<Occluder>& occluders) {
   const mjModel* m = twin.model();
   for (const auto& [name, pose] : objects) {
     const int b = mj_name2id(m, mjOBJ_BODY, name.c_str());
@@ -197,7 +201,14 @@ TargetView BelievedView(real2sim::TwinGeometry& twin, const std::array<double, 7
   std::vector<std::string> wanted;
   for (const auto& t : targets)
     if (t != held) wanted.push_back(t);
-  return TargetVisibility(twin, q, gripper_width, wanted);
+  TargetView view = TargetVisibility(twin, q, gripper_width, wanted);
+  if (!occluders.empty()) {
+    std::vector<real2sim::RasterMesh> parts{view.mesh};
+    for (const Occluder& o : occluders)
+      parts.push_back(real2sim::BoxMesh(o.center, o.size, Eigen::Vector3d(0, 0, 1)));
+    view.mesh = real2sim::JoinMeshes(parts);
+  }
+  return view;
 }
 
 Look ActiveLook(reality::Robot& robot, real2sim::TwinGeometry& twin,
@@ -209,13 +220,14 @@ Look ActiveLook(reality::Robot& robot, real2sim::TwinGeometry& twin,
     const reality::Observation& o = context.observation;
     std::array<double, 7> q;
     for (int i = 0; i < 7; ++i) q[i] = o.q[i];
-    const TargetView view =
-        BelievedView(twin, q, o.gripper_width, context.objects, context.held, targets);
+    const TargetView view = BelievedView(twin, q, o.gripper_width, context.objects, context.held,
+                                         targets, context.occluders);
     core::Rng rng(seed);
     const ViewChoice choice =
         ChooseView(view.mesh, search, mount, score ? score(context) : view.score, rng, options);
-    spdlog::debug("active look: azimuth {:.2f}, elevation {:.2f}, {} {:.2f}", choice.azimuth,
-                  choice.elevation, score ? "Q" : "targets fill (%)", choice.score);
+    spdlog::debug("active look: azimuth {:.2f}, elevation {:.2f}, {} {:.2f}; {} occluders",
+                  choice.azimuth, choice.elevation, score ? "Q" : "targets fill (%)", choice.score,
+                  context.occluders.size());
     return std::vector<reality::RgbdFrame>{
         robot.Capture({OrbitPose(mount, choice.azimuth, choice.elevation), capture})};
   };

@@ -82,8 +82,9 @@ ViewChoice ChooseView(const real2sim::RasterMesh& scene, const core::PinholeIntr
                       const ViewSearchOptions& options = {});
 
 // A mount that looks at a twin's objects: centred on their mean position at the twin's own
-// poses, 0.6 m out, from above (elevation 0.8-1.3 rad: a low view sees the table at a graze and
-// few of the arm's points the frame is registered by), all round but behind the robot.
+// poses, 0.6 m out, at the azimuths and elevations of the task camera's `mount_azimuth` and
+// `mount_elevation`. By default from above (elevation 0.8-1.3 rad: a low view sees the table at a
+// graze and few of the arm's points the frame is registered by), all round but behind the robot.
 OrbitMount ObjectsMount(const sim::Task& twin);
 
 // TargetVisibility with the scene as the twin has it (its objects at home) and the arm at rest:
@@ -105,18 +106,21 @@ core::Pose BestFixedView(real2sim::TwinGeometry& twin, const sim::Task& task,
                          const ViewSearchOptions& options = {}, uint64_t seed = 1);
 
 // The twin as the actor believes the scene is at a look: the arm at joints `q`, the objects where
-// it believes them, the `targets` it does not hold red (TargetVisibility).
+// it believes them, the `targets` it does not hold red (TargetVisibility), and what earlier frames
+// showed in the way (`occluders`) as boxes in the colour of the rest.
 TargetView BelievedView(real2sim::TwinGeometry& twin, const std::array<double, 7>& q,
                         double gripper_width,
                         const std::vector<std::pair<std::string, core::Pose>>& objects,
-                        const std::string& held, const std::vector<std::string>& targets);
+                        const std::string& held, const std::vector<std::string>& targets,
+                        const std::vector<Occluder>& occluders = {});
 
 // A score of the views at one look, which may depend on what the actor knows and plans then (a
 // sensing-aware Q of the actor's next step).
 using LookScore = std::function<ViewScore(const LookContext&)>;
 
 // SAM-RL's active look: at each look the view that shows `targets` best in the twin as the actor
-// believes it (BelievedView; ChooseView on its TargetVisibility, searched at `search`
+// believes it, around what earlier frames showed in the way (BelievedView with the context's
+// occluders; ChooseView on its TargetVisibility, searched at `search`
 // intrinsics), then one frame from there with the robot's movable camera at `capture`
 // intrinsics. With `score` set (a sensing-aware Q, QLookScore), the view is the one it scores
 // best instead, on the same target-coloured render.

@@ -450,6 +450,7 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model,
   best.inliers = result.inliers;
   best.outliers = result.outliers;
   best.rms = result.inliers ? std::sqrt(result.squares / result.inliers) : 0;
+  best.score = model.Score(result.inliers, result.outliers, options_);
   best.seen = best.inliers >= options_.min_points;
   if (!best.seen) best.pose = model.nominal;
   return best;

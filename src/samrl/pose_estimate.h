@@ -88,6 +88,10 @@ struct ObjectPose {
   int inliers = 0;    // points within options.inlier of the surface
   int outliers = 0;   // points inside its outline farther than options.reach
   double rms = 0;     // m, over the inliers
+  // The fit's score: inliers less the outliers weighed as options.outlier_weight says. Under 0,
+  // more of the frame speaks against the fit than for it (an object hidden, fitted to what
+  // stands in front of it).
+  double score = 0;
 };
 
 // A depth frame's points in the robot base frame: its reported extrinsics composed with

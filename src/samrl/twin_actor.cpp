@@ -6,6 +6,7 @@
 #include <cmath>
 #include <functional>
 #include <limits>
+#include <map>
 #include <set>
 
 #include "core/error.h"
@@ -62,7 +63,45 @@ constexpr double kReachMargin = 0.03;
 constexpr int kReachStray = 4;
 constexpr int kReachMinPoints = 50;
 
+// The looks' occluders: points farther than this from every object where the actor believes it
+// (its own points off its drawing by a few mm are not in the way), in columns of this size with
+// this many points at least (a 640x480 frame puts a few hundred on a 2 cm square of a box's top
+// at arm's length; a handful are the sensor's strays).
+constexpr double kOccluderMargin = 0.02;
+constexpr double kOccluderCell = 0.02;
+constexpr int kOccluderMinPoints = 20;
+
+// A fit the actor acts on: seen, and with more of the frame for it than against it. A block behind
+// a screen is fitted to the screen (on the proxy: 281 points explained, 1460 inside its outline
+// not); that is not a sight of it.
+bool Trusted(const ObjectPose& e) { return e.seen && e.score > 0; }
+
 }  // namespace
+
+std::vector<Occluder> OccluderColumns(const std::vector<Eigen::Vector3d>& points, double cell,
+                                      double floor, int min_points) {
+  if (!(cell > 0)) throw core::Error("occluder columns: the cell must be positive");
+  struct Column {
+    int count = 0;
+    double top = -std::numeric_limits<double>::infinity();
+  };
+  // Ordered by cell, so the boxes come out the same whatever order the points came in.
+  std::map<std::pair<int64_t, int64_t>, Column> columns;
+  for (const Eigen::Vector3d& p : points) {
+    if (!p.allFinite()) continue;
+    Column& c = columns[{int64_t(std::floor(p.x() / cell)), int64_t(std::floor(p.y() / cell))}];
+    ++c.count;
+    c.top = std::max(c.top, p.z());
+  }
+  std::vector<Occluder> out;
+  for (const auto& [key, c] : columns) {
+    if (c.count < min_points || c.top <= floor) continue;
+    out.push_back({Eigen::Vector3d((key.first + 0.5) * cell, (key.second + 0.5) * cell,
+                                   0.5 * (floor + c.top)),
+                   Eigen::Vector3d(cell, cell, c.top - floor)});
+  }
+  return out;
+}
 
 Look FixedLook(reality::Robot& robot, const core::Pose& pose,
                const sim::CameraIntrinsics& intrinsics) {
@@ -126,6 +165,17 @@ void TwinActor::Begin(uint64_t seed) {
   closure_ = 0;
   carried_ = -1;
   reach_measured_ = false;
+  unexplained_.clear();
+}
+
+bool TwinActor::NearAnObject(const Eigen::Vector3d& point, double margin) const {
+  const Eigen::Vector3d world = env_.base() * point;
+  for (std::size_t i = 0; i < bodies_.size(); ++i) {
+    // A fit not to be trusted stands where something else is (a screen): that is in the way.
+    if (i < estimates_.size() && int(i) != carried_ && !Trusted(estimates_[i])) continue;
+    if (DistanceToBody(env_.model(), env_.data(), bodies_[i], world) < margin) return true;
+  }
+  return false;
 }
 
 LookContext TwinActor::Context(const reality::Observation& o) const {
@@ -134,9 +184,19 @@ LookContext TwinActor::Context(const reality::Observation& o) const {
                       {},
                       carried_ >= 0 ? names[carried_] : "",
                       expert_.current_step(),
-                      int(task_->spec().expert.steps.size())};
+                      int(task_->spec().expert.steps.size()),
+                      {}};
   for (std::size_t i = 0; i < bodies_.size(); ++i)
     context.objects.emplace_back(names[i], env_.BodyPose(bodies_[i]));
+  if (relook_.occluders && !unexplained_.empty()) {
+    // What is still unexplained where the actor now believes the objects (one it since found
+    // elsewhere may have stood there).
+    std::vector<Eigen::Vector3d> in_the_way;
+    for (const Eigen::Vector3d& p : unexplained_)
+      if (!NearAnObject(p, kOccluderMargin)) in_the_way.push_back(p);
+    context.occluders = OccluderColumns(in_the_way, kOccluderCell, task_->spec().workspace.min[2],
+                                        kOccluderMinPoints);
+  }
   return context;
 }
 
@@ -161,21 +221,34 @@ double TwinActor::LookAndEstimate(const reality::Observation& o, double moved_bo
   for (std::size_t i = 0; i < bodies_.size(); ++i) {
     if (skip[i]) continue;
     const double d = (found[i].pose.translation - estimates_[i].pose.translation).head<2>().norm();
-    if (!first && (!found[i].seen || d < moved_bound)) continue;
-    if (!first && d > relook_.max_move) {
+    // An object no look has yet seen (or fitted in a way to trust) was believed where the twin
+    // has it, or where it was misfitted: wherever it is found now, it was there all along.
+    const bool first_sight = !first && Trusted(found[i]) && !Trusted(estimates_[i]);
+    if (!first && !first_sight && (!Trusted(found[i]) || d < moved_bound)) continue;
+    if (!first && !first_sight && d > relook_.max_move) {
       spdlog::info("twin actor: look {} fitted {} {:.0f} mm away, too far for a push; ignored",
                    looks_, found[i].body, 1e3 * d);
       continue;
     }
     moved = std::max(moved, d);
     estimates_[i] = found[i];
+    // A fit not to be trusted (at the first look) is believed where the twin has the object: a
+    // block fitted to a screen would have the next look search for it inside the screen.
+    if (!Trusted(found[i])) estimates_[i].pose = estimator_.nominal(int(i));
     // A learned actor saw objects turned about as the twin has them, not a quarter turn away.
-    if (policy_) estimates_[i].pose = estimator_.NearestLookAlike(int(i), found[i].pose);
+    if (policy_) estimates_[i].pose = estimator_.NearestLookAlike(int(i), estimates_[i].pose);
     env_.PlaceBody(bodies_[i], estimates_[i].pose);
-    spdlog::debug("twin actor, look {}: {} {} at ({:.3f}, {:.3f}), {} points explained, {} not",
-                  looks_, found[i].body, found[i].seen ? "seen" : "NOT seen",
-                  found[i].pose.translation.x(), found[i].pose.translation.y(), found[i].inliers,
-                  found[i].outliers);
+    spdlog::debug(
+        "twin actor, look {}: {} {} at ({:.3f}, {:.3f}), {} points explained, {} not, score {:.0f}",
+        looks_, found[i].body, found[i].seen ? "seen" : "NOT seen", found[i].pose.translation.x(),
+        found[i].pose.translation.y(), found[i].inliers, found[i].outliers, found[i].score);
+  }
+  if (relook_.occluders) {
+    const std::size_t before = unexplained_.size();
+    for (const Eigen::Vector3d& p : points)
+      if (!NearAnObject(p, kOccluderMargin)) unexplained_.push_back(p);
+    spdlog::debug("twin actor, look {}: {} points no object explains", looks_,
+                  unexplained_.size() - before);
   }
   return moved;
 }
@@ -245,7 +318,20 @@ reality::OperatorInput TwinActor::Next(const reality::Observation& o) {
   env_.PoseRobot(o.q, 0.5 * o.gripper_width, closure_);
   const core::Pose tool = env_.EePose();
   if (carried_ >= 0) env_.PlaceBody(bodies_[carried_], tool * carried_in_tool_);
-  if (looks_ == 0) LookAndEstimate(o, relook_.moved);
+  if (looks_ == 0) {
+    LookAndEstimate(o, relook_.moved);
+    const bool unsure = std::any_of(estimates_.begin(), estimates_.end(),
+                                    [](const ObjectPose& e) { return !Trusted(e); });
+    if (relook_.look_when_unseen && unsure && looks_ < relook_.max_looks) {
+      for (const ObjectPose& e : estimates_)
+        if (!Trusted(e))
+          spdlog::info(
+              "twin actor: the first look did not see {} ({} points explained, {} not); "
+              "looking again",
+              e.body, e.inliers, e.outliers);
+      LookAndEstimate(o, relook_.moved);
+    }
+  }
   if (expert_.finished() && !policy_) {
     input.kind = reality::OperatorInput::Kind::kDone;
     return input;

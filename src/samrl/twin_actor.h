@@ -28,16 +28,33 @@
 
 namespace twinforge::samrl {
 
+// A box of space that a frame showed filled by something the twin does not have where the actor
+// believes the scene is (clutter, a panel standing elsewhere than the twin's): axis-aligned, in
+// the robot's base frame.
+struct Occluder {
+  Eigen::Vector3d center, size;
+};
+
 // What the actor knows when it looks: the robot's observation, where it believes each object is
-// (robot base frame; at a trial's first look, where the twin has them), what it holds, and its
-// plan: the expert step it does next (at a look again, the one after the step marked `look`).
+// (robot base frame; at a trial's first look, where the twin has them), what it holds, its plan:
+// the expert step it does next (at a look again, the one after the step marked `look`), and what
+// its earlier looks in the trial saw in the way (OccluderColumns of the points no object
+// explains; none at the first look).
 struct LookContext {
   const reality::Observation& observation;
   std::vector<std::pair<std::string, core::Pose>> objects;
   std::string held;  // "" when the gripper holds nothing
   int step = 0;      // the expert step the actor does next, of `steps`
   int steps = 1;
+  std::vector<Occluder> occluders;
 };
+
+// The space `points` (base frame) show filled, as columns standing on the table: each `cell` x
+// `cell` square of the table's plane that holds at least `min_points` of them (fewer are the
+// sensor's strays) becomes a box from `floor` (m) up to the highest of its points. A camera sees a
+// box of clutter's top and near sides; what hides a view is the box under them.
+std::vector<Occluder> OccluderColumns(const std::vector<Eigen::Vector3d>& points, double cell,
+                                      double floor, int min_points);
 
 // The frames to estimate the objects from.
 using Look = std::function<std::vector<reality::RgbdFrame>(const LookContext&)>;
@@ -68,6 +85,14 @@ struct RelookOptions {
   // in the fingers). At 2.5 mm at every look, the scatter of looks over a cluttered block (4-6 mm)
   // redid steps that were right.
   double moved_when_blocked = 0.0025;
+  // An object the first look did not see (hidden, out of view, or fitted where more of the frame
+  // speaks against it than for it: a block behind a screen fitted to the screen): look again at
+  // once, if looks remain. The look is told what the first frame showed in the way. An object no
+  // look has seen is put wherever a later look sees it, however far (max_move is for pushes).
+  bool look_when_unseen = true;
+  // Tell each look what the trial's earlier frames showed that no object explains (LookContext::
+  // occluders): an active look then chooses its view around it. Off, a look knows only the twin.
+  bool occluders = true;
   template <class A>
   void Serialize(A& a) {
     a("max_looks", max_looks);
@@ -76,6 +101,8 @@ struct RelookOptions {
     a("measure_reach", measure_reach);
     a("look_when_blocked", look_when_blocked);
     a("moved_when_blocked", moved_when_blocked);
+    a("look_when_unseen", look_when_unseen);
+    a("occluders", occluders);
     a.Require(max_looks >= 1, "max_looks", "at least the first look");
     a.Require(moved > 0 && max_move > moved, "moved", "0 < moved < max_move, in m");
     a.Require(moved_when_blocked > 0 && max_move > moved_when_blocked, "moved_when_blocked",
@@ -141,9 +168,16 @@ class TwinActor : public reality::Operator {
   // found less than `moved_bound` (m) from where it was believed stays there. Returns the largest
   // distance (table plane) an object seen was found from where it was believed.
   double LookAndEstimate(const reality::Observation& o, double moved_bound);
+  // Whether `point` (base frame) is within `margin` of an object where the actor believes it (and
+  // the fit it believes is one to trust).
+  bool NearAnObject(const Eigen::Vector3d& point, double margin) const;
   // Looks at the held object and moves its carried sites to where its points end.
   void MeasureReach(const reality::Observation& o);
   bool reach_measured_ = false;  // this trial
+  // This trial's points that no object explained when they were seen (base frame): clutter, or
+  // fixed geometry the twin has elsewhere. Those that the current beliefs still leave unexplained
+  // are the looks' occluders.
+  std::vector<Eigen::Vector3d> unexplained_;
 
   RelookOptions relook_;
   core::Rng rng_{0};

@@ -22,7 +22,7 @@ TEST_P(ExpertBar, SucceedsAtLeast95PercentAtLevel1) {
 INSTANTIATE_TEST_SUITE_P(Tasks, ExpertBar,
                          ::testing::Values("open_drawer", "open_cabinet", "mug_on_shelf",
                                            "peg_insertion", "peg_insertion_occluded",
-                                           "spatula_flipping"));
+                                           "peg_insertion_hidden", "spatula_flipping"));
 
 // Planned moves (set_planning): the expert follows a trajectory optimized through the twin (iLQR,
 // least joint motion over 1.5 times the steps the move needs): its first move is slower and

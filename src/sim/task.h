@@ -4,6 +4,7 @@
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <filesystem>
 #include <functional>
 #include <memory>
@@ -319,6 +320,12 @@ struct CameraSpec {
   // reported extrinsics are corrected by the same (reality::FrameCloud).
   std::array<double, 6> correction{0, 0, 0, 0, 0, 0};
   DepthNoise noise;  // the real sensor's, as calibration measured it (none by default)
+  // The movable camera's mount (SAM-RL's camera arm; samrl::ObjectsMount): 0.6 m from the task's
+  // objects, at these azimuths ([min, max] rad about +z, from +x; the robot stands at -x) and
+  // elevations (rad above the table). Unset, ObjectsMount's defaults (all round but behind the
+  // robot, 0.8-1.3 rad up). Optional so that a task that does not set them is written, and
+  // fingerprinted, as before they existed: a run made then keeps its stages.
+  std::optional<std::array<double, 2>> mount_azimuth, mount_elevation;
   template <class A>
   void Serialize(A& a) {
     a("name", name);
@@ -329,7 +336,17 @@ struct CameraSpec {
     a("width", width);
     a("height", height);
     a("correction", correction);
+    a("mount_azimuth", mount_azimuth);
+    a("mount_elevation", mount_elevation);
     a.Require(width > 0 && height > 0, "width", "a positive image size");
+    a.Require(!mount_azimuth ||
+                  (-M_PI <= (*mount_azimuth)[0] && (*mount_azimuth)[0] <= (*mount_azimuth)[1] &&
+                   (*mount_azimuth)[1] <= M_PI),
+              "mount_azimuth", "[min, max] rad within [-pi, pi]");
+    a.Require(!mount_elevation ||
+                  (0 < (*mount_elevation)[0] && (*mount_elevation)[0] <= (*mount_elevation)[1] &&
+                   (*mount_elevation)[1] < M_PI / 2),
+              "mount_elevation", "[min, max] rad within (0, pi/2)");
     a.Require(fovy_deg > 1 && fovy_deg < 170, "fovy_deg", "a field of view in (1, 170) deg");
   }
 };
