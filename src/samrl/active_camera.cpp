@@ -14,6 +14,10 @@ namespace {
 
 const auto kDouble = torch::TensorOptions().dtype(torch::kFloat64);
 
+// TargetVisibility's colours: its score counts the red, so anything else drawn into its views
+// (the occluders a look is told of) is drawn in the colour of the rest.
+const Eigen::Vector3d kTargetColor(1, 0, 0), kRestColor(0, 0, 1);
+
 double Score(const real2sim::RasterMesh& scene, const core::PinholeIntrinsics& intrinsics,
              const OrbitMount& mount, const ViewScore& score, double azimuth, double elevation,
              const real2sim::SoftRasterOptions& raster) {
@@ -46,7 +50,7 @@ TargetView TargetVisibility(real2sim::TwinGeometry& twin, const std::array<doubl
   const auto color = [&](int geom) {
     const bool target =
         std::find(bodies.begin(), bodies.end(), m->geom_bodyid[geom]) != bodies.end();
-    return target ? Eigen::Vector3d(1, 0, 0) : Eigen::Vector3d(0, 0, 1);
+    return target ? kTargetColor : kRestColor;
   };
   return {twin.Posed(q, gripper_width, color),
           [](const real2sim::SoftImage& image) { return image.rgb.select(2, 0).mean() * 100.0; }};
@@ -205,7 +209,7 @@ TargetView BelievedView(real2sim::TwinGeometry& twin, const std::array<double, 7
   if (!occluders.empty()) {
     std::vector<real2sim::RasterMesh> parts{view.mesh};
     for (const Occluder& o : occluders)
-      parts.push_back(real2sim::BoxMesh(o.center, o.size, Eigen::Vector3d(0, 0, 1)));
+      parts.push_back(real2sim::BoxMesh(o.center, o.size, kRestColor));
     view.mesh = real2sim::JoinMeshes(parts);
   }
   return view;
