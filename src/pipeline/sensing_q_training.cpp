@@ -51,6 +51,9 @@ struct LookRecord {
   std::vector<std::pair<std::string, core::Pose>> objects;
   std::string held;
   int step = 0, steps = 1;
+  // What the trial's earlier frames showed in the way (LookContext::occluders): Q is fitted to the
+  // view the actor would render with them, as an active look renders it.
+  std::vector<samrl::Occluder> occluders;
 };
 
 nlohmann::json LookJson(const LookRecord& r) {
@@ -58,10 +61,14 @@ nlohmann::json LookJson(const LookRecord& r) {
   for (const auto& [name, p] : r.objects)
     objects[name] = {p.translation.x(), p.translation.y(), p.translation.z(), p.rotation.w(),
                      p.rotation.x(),    p.rotation.y(),    p.rotation.z()};
+  nlohmann::json occluders = nlohmann::json::array();
+  for (const samrl::Occluder& o : r.occluders)
+    occluders.push_back(
+        {o.center.x(), o.center.y(), o.center.z(), o.size.x(), o.size.y(), o.size.z()});
   return {{"seed", r.seed},           {"look", r.look}, {"azimuth", r.azimuth},
           {"elevation", r.elevation}, {"q", r.q},       {"gripper_width", r.gripper_width},
           {"objects", objects},       {"held", r.held}, {"step", r.step},
-          {"steps", r.steps}};
+          {"steps", r.steps},         {"occluders", occluders}};
 }
 
 LookRecord LookFromJson(const nlohmann::json& j) {
@@ -82,6 +89,12 @@ LookRecord LookFromJson(const nlohmann::json& j) {
   r.held = j.at("held").get<std::string>();
   r.step = j.at("step").get<int>();
   r.steps = j.at("steps").get<int>();
+  // Looks written before stop 75 did not record them.
+  if (j.contains("occluders"))
+    for (const auto& v : j.at("occluders")) {
+      const auto x = v.get<std::array<double, 6>>();
+      r.occluders.push_back({{x[0], x[1], x[2]}, {x[3], x[4], x[5]}});
+    }
   return r;
 }
 
@@ -172,6 +185,7 @@ RealityEvalReport RunEpisodes(const sim::TaskSpec& twin, const SensingQTrainOpti
     r.held = context.held;
     r.step = context.step;
     r.steps = context.steps;
+    r.occluders = context.occluders;
     looks_out << LookJson(r).dump() << "\n" << std::flush;
     if (!looks_out) throw core::IoError("train samrl: cannot write to " + looks_file.string());
     return std::vector<reality::RgbdFrame>{
@@ -281,8 +295,8 @@ SensingQTrainReport TrainSensingQ(const sim::TaskSpec& twin, const SensingQTrain
          ++it) {
       const LookRecord& r = it->second;
       torch::NoGradGuard no_grad;
-      const samrl::TargetView seen =
-          samrl::BelievedView(geometry, r.q, r.gripper_width, r.objects, r.held, twin.objects);
+      const samrl::TargetView seen = samrl::BelievedView(geometry, r.q, r.gripper_width, r.objects,
+                                                         r.held, twin.objects, r.occluders);
       const real2sim::SoftImage image = real2sim::SoftRasterize(
           seen.mesh, search,
           samrl::OrbitPose(mount, torch::tensor({r.azimuth, r.elevation}, torch::kFloat64)));
@@ -294,6 +308,7 @@ SensingQTrainReport TrainSensingQ(const sim::TaskSpec& twin, const SensingQTrain
                        {"azimuth", r.azimuth},
                        {"elevation", r.elevation},
                        {"step", r.step},
+                       {"occluders", r.occluders.size()},
                        {"targets_fill", seen.score(image).item<double>()},
                        {"success", t.success},
                        {"return", episode_return}});

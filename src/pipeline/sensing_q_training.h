@@ -2,7 +2,8 @@
 // episodes in the twin itself (ProxyReality::SimulatedTwin: the twin's physics, an ideal sensor),
 // looking as eval's does (first, then again after the expert steps marked `look`), each look
 // from a camera pose drawn on the orbit mount. The view it would render in the twin from that
-// pose, as it believed the scene then, and its plan then (the expert step it does next) are
+// pose, as it believed the scene then (with what its earlier frames showed in the way, as the
+// active look renders it), and its plan then (the expert step it does next) are
 // paired with the episode's return (1 on success, else 0), and Q(view, plan) is fitted to the
 // returns by regression. At run time (`eval --actor twin --look q`) each look takes the view Q
 // scores best for the actor's plan, in the twin as the actor believes it.

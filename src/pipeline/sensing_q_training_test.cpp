@@ -135,5 +135,61 @@ TEST(TrainSensingQ, RunsEpisodesResumesAndLoadsForItsTwinOnly) {
   std::filesystem::remove_all(dir);
 }
 
+// What the actor's earlier frames showed in the way is part of the view Q is fitted to, as the
+// active look renders it at run time: on the hidden peg the screen stands elsewhere than the
+// twin has it, so looks after the first are told of its columns. Looks files written before they
+// were recorded are read as telling of none.
+TEST(TrainSensingQ, FitsEachViewWithWhatEarlierFramesShowedInTheWay) {
+  learn::PinMathThreads(1);
+  const sim::TaskSpec twin = sim::LoadTaskSpec("peg_insertion_hidden");
+  const std::filesystem::path dir = core::testing::TestDir("sensing_q_occluders");
+  SensingQTrainOptions o;
+  o.episodes = 4;
+  o.capture_scale = 2;
+  o.fit.steps = 5;
+  o.workers = 2;
+  TrainSensingQ(twin, o, dir);
+  const nlohmann::json told = ReadJson(dir / "q.json").at("views");
+  int later_looks = 0, with_occluders = 0;
+  for (const auto& v : told) {
+    if (v.at("look").get<int>() == 0) {
+      EXPECT_EQ(v.at("occluders").get<int>(), 0) << "a first look is told of nothing" << v;
+    } else {
+      ++later_looks;
+      with_occluders += v.at("occluders").get<int>() > 0;
+    }
+  }
+  ASSERT_GT(later_looks, 0);
+  EXPECT_GT(with_occluders, 0) << "no look was told of the screen standing elsewhere";
+
+  // The same looks as a file from before stop 75 holds them: no occluders, the views rendered
+  // without them. A column only hides what is behind it: no view shows the targets less for
+  // losing them, and some show them more.
+  for (const char* name : {"looks.0.jsonl", "looks.1.jsonl"}) {
+    std::ifstream in(dir / name);
+    std::string text, line;
+    while (std::getline(in, line)) {
+      nlohmann::json j = nlohmann::json::parse(line);
+      j.erase("occluders");
+      text += j.dump() + "\n";
+    }
+    in.close();
+    std::ofstream(dir / name) << text;
+  }
+  const SensingQTrainReport old = TrainSensingQ(twin, o, dir);
+  EXPECT_EQ(old.resumed, 4);
+  const nlohmann::json untold = ReadJson(dir / "q.json").at("views");
+  ASSERT_EQ(untold.size(), told.size());
+  int shown_more = 0;
+  for (std::size_t i = 0; i < told.size(); ++i) {
+    EXPECT_EQ(untold[i].at("occluders").get<int>(), 0);
+    const double with = told[i].at("targets_fill"), without = untold[i].at("targets_fill");
+    EXPECT_GE(without, with - 1e-9) << told[i];
+    shown_more += without > with + 1e-6;
+  }
+  EXPECT_GT(shown_more, 0) << "no view had a column in front of its targets";
+  std::filesystem::remove_all(dir);
+}
+
 }  // namespace
 }  // namespace twinforge::pipeline
