@@ -27,6 +27,17 @@ std::vector<bool> Outcomes(const std::filesystem::path& dir) {
   return outcomes;
 }
 
+// A small run: `episodes` on two workers, frames at twice the task camera's resolution, Q fitted
+// in `fit_steps`.
+SensingQTrainOptions SmallRun(int episodes, int fit_steps) {
+  SensingQTrainOptions o;
+  o.episodes = episodes;
+  o.capture_scale = 2;
+  o.fit.steps = fit_steps;
+  o.workers = 2;
+  return o;
+}
+
 // train samrl's loop, small: 6 simulated episodes of the twin actor on the occluded peg's twin,
 // each look from its own random view and recorded with the actor's plan then. The episodes and
 // their outcomes do not depend on how many workers run them; a second run reads them all back
@@ -36,11 +47,7 @@ TEST(TrainSensingQ, RunsEpisodesResumesAndLoadsForItsTwinOnly) {
   learn::PinMathThreads(1);
   const sim::TaskSpec twin = sim::LoadTaskSpec("peg_insertion_occluded");
   const std::filesystem::path dir = core::testing::TestDir("sensing_q");
-  SensingQTrainOptions o;
-  o.episodes = 6;
-  o.capture_scale = 2;
-  o.fit.steps = 20;
-  o.workers = 2;
+  SensingQTrainOptions o = SmallRun(6, 20);
   const SensingQTrainReport two = TrainSensingQ(twin, o, dir / "two");
   EXPECT_EQ(two.episodes, 6);
   EXPECT_EQ(two.resumed, 0);
@@ -143,11 +150,7 @@ TEST(TrainSensingQ, FitsEachViewWithWhatEarlierFramesShowedInTheWay) {
   learn::PinMathThreads(1);
   const sim::TaskSpec twin = sim::LoadTaskSpec("peg_insertion_hidden");
   const std::filesystem::path dir = core::testing::TestDir("sensing_q_occluders");
-  SensingQTrainOptions o;
-  o.episodes = 4;
-  o.capture_scale = 2;
-  o.fit.steps = 5;
-  o.workers = 2;
+  const SensingQTrainOptions o = SmallRun(4, 5);
   TrainSensingQ(twin, o, dir);
   const nlohmann::json told = ReadJson(dir / "q.json").at("views");
   int later_looks = 0, with_occluders = 0;
