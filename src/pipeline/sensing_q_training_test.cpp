@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <fstream>
+#include <functional>
 #include <nlohmann/json.hpp>
 
 #include "core/error.h"
@@ -25,6 +26,16 @@ std::vector<bool> Outcomes(const std::filesystem::path& dir) {
   for (const auto& v : meta.at("views")) outcomes.push_back(v.at("success"));
   EXPECT_FALSE(outcomes.empty()) << dir;
   return outcomes;
+}
+
+// Rewrites a JSON-lines file in place, each line (numbered from 0) as `edit` returns it.
+void EditLines(const std::filesystem::path& file,
+               const std::function<std::string(int, std::string)>& edit) {
+  std::ifstream in(file);
+  std::string text, line;
+  for (int n = 0; std::getline(in, line); ++n) text += edit(n, line) + "\n";
+  in.close();
+  std::ofstream(file) << text;
 }
 
 // A small run: `episodes` on two workers, frames at twice the task camera's resolution, Q fitted
@@ -103,17 +114,11 @@ TEST(TrainSensingQ, RunsEpisodesResumesAndLoadsForItsTwinOnly) {
   EXPECT_GT(failed_looks, 0) << "all 6 episodes succeeded: the test shows nothing of closeness";
   EXPECT_GT(partly_near, 0) << "every failure scored 0: closeness told them apart no better";
   // Episodes logged without it (before it was) are refused by name, not read as 0.
-  {
-    std::ifstream in(dir / "two" / "episodes.0.jsonl");
-    std::string text, line;
-    for (int n = 0; std::getline(in, line); ++n) {
-      if (n == 1)
-        line.replace(line.find("\"grader\""), std::string("\"grader\"").size(), "\"judge\"");
-      text += line + "\n";
-    }
-    in.close();
-    std::ofstream(dir / "two" / "episodes.0.jsonl") << text;
-  }
+  EditLines(dir / "two" / "episodes.0.jsonl", [](int n, std::string line) {
+    if (n == 1)
+      line.replace(line.find("\"grader\""), std::string("\"grader\"").size(), "\"judge\"");
+    return line;
+  });
   try {
     TrainSensingQ(twin, o, dir / "two");
     ADD_FAILURE() << "an episode without its closeness was fitted";
@@ -168,17 +173,12 @@ TEST(TrainSensingQ, FitsEachViewWithWhatEarlierFramesShowedInTheWay) {
   // The same looks as a file from before stop 75 holds them: no occluders, the views rendered
   // without them. A column only hides what is behind it: no view shows the targets less for
   // losing them, and some show them more.
-  for (const char* name : {"looks.0.jsonl", "looks.1.jsonl"}) {
-    std::ifstream in(dir / name);
-    std::string text, line;
-    while (std::getline(in, line)) {
+  for (const char* name : {"looks.0.jsonl", "looks.1.jsonl"})
+    EditLines(dir / name, [](int, const std::string& line) {
       nlohmann::json j = nlohmann::json::parse(line);
       j.erase("occluders");
-      text += j.dump() + "\n";
-    }
-    in.close();
-    std::ofstream(dir / name) << text;
-  }
+      return j.dump();
+    });
   const SensingQTrainReport old = TrainSensingQ(twin, o, dir);
   EXPECT_EQ(old.resumed, 4);
   const nlohmann::json untold = ReadJson(dir / "q.json").at("views");
