@@ -65,10 +65,17 @@ nlohmann::json LookJson(const LookRecord& r) {
   for (const samrl::Occluder& o : r.occluders)
     occluders.push_back(
         {o.center.x(), o.center.y(), o.center.z(), o.size.x(), o.size.y(), o.size.z()});
-  return {{"seed", r.seed},           {"look", r.look}, {"azimuth", r.azimuth},
-          {"elevation", r.elevation}, {"q", r.q},       {"gripper_width", r.gripper_width},
-          {"objects", objects},       {"held", r.held}, {"step", r.step},
-          {"steps", r.steps},         {"occluders", occluders}};
+  return {{"seed", r.seed},
+          {"look", r.look},
+          {"azimuth", r.azimuth},
+          {"elevation", r.elevation},
+          {"q", r.q},
+          {"gripper_width", r.gripper_width},
+          {"objects", objects},
+          {"held", r.held},
+          {"step", r.step},
+          {"steps", r.steps},
+          {"occluders", occluders}};
 }
 
 LookRecord LookFromJson(const nlohmann::json& j) {
