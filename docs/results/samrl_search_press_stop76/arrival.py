@@ -2,14 +2,12 @@
 # where the peg tip came down to the hole's mouth, split into the hole's estimate error (the last
 # trusted fit in the log against the hidden block) and the rest (the peg in the hand, the tool;
 # in the tool's frame). Usage: python3 arrival.py 5000 (beside search.py).
-import json,sys,math,collections,re
-exec(open('search.py').read().split('res={}')[0])
+import sys,math,collections,re
+from search import R,load,tip_and_top,at_mouth
 s=sys.argv[1]
-res={d['trial']:d for d in map(json.loads,open(f'a{s}.jsonl')) if 'success' in d}
-tr=collections.defaultdict(list)
-for l in open(f'a{s}.trace'):
-    d=json.loads(l); tr[d['trial']].append(d)
-# hole estimates per trial from the log: trials separated by 'info eval  N/40'
+res,tr=load(f'a{s}.trace',f'a{s}.jsonl')
+# The trusted fits of the block per trial, from the debug log: a trial's first look is the first
+# "look 1:" line after a line of another look.
 est=collections.defaultdict(list); t=-1; prev=None
 for l in open(f'a{s}.log'):
     m=re.search(r'twin actor, look (\d+):',l)
@@ -19,15 +17,12 @@ for l in open(f'a{s}.log'):
     m=re.search(r'hole_block seen at \(([-0-9.]+), ([-0-9.]+)\).*score (-?[0-9]+)',l)
     if m and int(m.group(3))>0: est[t].append((float(m.group(1)),float(m.group(2))))
 for t in sorted(tr):
-    rows=tr[t]
-    for d in rows:
-        g=d['grader']; hb=g['objects']['hole_block']; pg=g['objects']['peg']
-        Mh=R(g['object_quats']['hole_block']); Mp=R(g['object_quats']['peg'])
-        top=[hb[i]+ap(Mh,[0,0,0.02])[i] for i in range(3)]
-        tip=[pg[i]+ap(Mp,[0,0,-0.045])[i] for i in range(3)]
-        if tip[2]-top[2]<0.003 and math.hypot(tip[0]-top[0],tip[1]-top[1])<0.015: break
+    for d in tr[t]:
+        tip,top=tip_and_top(d)
+        if at_mouth(tip,top): break
     else: continue
     if not est[t]: continue
+    hb=d['grader']['objects']['hole_block']
     e=est[t][-1]; he=((e[0]-hb[0])*1000,(e[1]-hb[1])*1000)
     arr=((tip[0]-top[0])*1000,(tip[1]-top[1])*1000)
     # in-hand+tracking = arrival - hole error ; express in tool frame
