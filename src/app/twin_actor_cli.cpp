@@ -31,9 +31,12 @@ void TwinActorCli::Add(CLI::App* c) {
   c->add_option("--q", q, "twin actor, --look q: the Q file train samrl wrote (DIR/q.pt)")
       ->check(CLI::ExistingFile);
   c->add_option("--register-to", register_to,
-                "twin actor: what the frame is registered to before the objects are fitted: robot "
-                "(the arm, exact) or fixed (all of the twin's fixed geometry: the table, panels)")
-      ->check(CLI::IsMember({"robot", "fixed"}));
+                "twin actor: what the frame is registered to before the objects are fitted: "
+                "robot-and-table (the arm, exact, and the upward faces of the twin's fixed "
+                "geometry, which hold only the frame's height and tilt), robot (the arm alone; "
+                "the default before stop 77) or fixed (all of the twin's fixed geometry: the "
+                "table, panels)")
+      ->check(CLI::IsMember({"robot-and-table", "robot", "fixed"}));
   c->add_option("--capture-scale", capture_scale,
                 "twin actor: the frame's resolution, as a multiple of the task camera's")
       ->check(CLI::Range(1, 16));
@@ -116,7 +119,8 @@ TwinActorOnRobot::TwinActorOnRobot(reality::Robot& robot, const sim::TaskSpec& t
                                     search, seed);
   }
   samrl::PoseEstimateOptions estimate;
-  estimate.register_to_robot = cli.register_to == "robot";
+  estimate.register_to_robot = cli.register_to != "fixed";
+  estimate.register_tops = cli.register_to == "robot-and-table";
   estimate.settle = cli.settle;
   actor_ = std::make_unique<samrl::TwinActor>(twin_, robot, look_, robot.Info().has_success_oracle,
                                               estimate, core::Pose{}, cli.relook);
@@ -130,6 +134,7 @@ TwinActorOnRobot::TwinActorOnRobot(reality::Robot& robot, const sim::TaskSpec& t
   header_["look"] = cli.look;
   if (q_.net) header_["q_hash"] = q_.hash;
   header_["settle"] = cli.settle;
+  header_["register_to"] = cli.register_to;
   header_["max_looks"] = cli.relook.max_looks;
   header_["moved"] = cli.relook.moved;
   header_["max_move"] = cli.relook.max_move;

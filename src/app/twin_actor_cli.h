@@ -19,7 +19,7 @@ namespace twinforge::app {
 
 struct TwinActorCli {
   std::string actor = "policy";  // what acts: a --policy file, or the twin actor
-  std::string look = "active", register_to = "robot";
+  std::string look = "active", register_to = "robot-and-table";
   std::string q;             // --look q: the sensing-aware Q (train samrl's q.pt)
   std::string actor_policy;  // the twin actor acts with this state policy (train imitate's)
   int capture_scale = 8;

@@ -41,7 +41,10 @@ int SuccessesFromView(const sim::TaskSpec& twin, const core::Pose& view, int epi
 // twin more often than from the random views, and more often than from the task camera's pose,
 // where the panel hides the hole. Measured (deterministic): 9/48 from the random views; from the
 // Q's view 3/6 at stop 36, 6/6 at stop 44 (the expert searching for the hole since stop 43); 0/6
-// from the task camera's.
+// from the task camera's. Since stop 52 (a registration that slid is not used) the random views
+// succeed in 40-43 of the 48, and 15 points over them is out of reach: the Q's view has to be one
+// that works (5 or 6 of 6, at least the random views' rate), and the task camera's, behind the
+// panel, not.
 TEST(TrainSensingQ, ItsQsViewSucceedsMoreOftenThanRandomViews) {
   learn::PinMathThreads(1);
   const sim::TaskSpec twin = sim::LoadTaskSpec("peg_insertion_occluded");
@@ -61,9 +64,8 @@ TEST(TrainSensingQ, ItsQsViewSucceedsMoreOftenThanRandomViews) {
                         o.capture_scale, dir / "chosen.jsonl");
   const int fixed = SuccessesFromView(twin, sim::MakeCamera(twin.camera).pose, 6, o.capture_scale,
                                       dir / "fixed.jsonl");
-  EXPECT_GE(chosen, 3) << "random views: " << r.successes << "/" << r.episodes;
-  EXPECT_GT(chosen / 6.0, random_rate + 0.15)
-      << "random views: " << r.successes << "/" << r.episodes;
+  EXPECT_GE(chosen, 5) << "random views: " << r.successes << "/" << r.episodes;
+  EXPECT_GE(chosen / 6.0, random_rate) << "random views: " << r.successes << "/" << r.episodes;
   EXPECT_LE(fixed, 1);
   std::filesystem::remove_all(dir);
 }

@@ -263,9 +263,20 @@ core::Pose AlignPoints(const std::vector<Eigen::Vector3d>& source,
 
 core::Pose AlignToSurface(const std::vector<Eigen::Vector3d>& points, const Mesh& surface,
                           double reach, int samples, uint64_t seed) {
+  return AlignToSurfaces(points, {{&surface, samples}}, reach, seed);
+}
+
+core::Pose AlignToSurfaces(const std::vector<Eigen::Vector3d>& points,
+                           const std::vector<SampledSurface>& surfaces, double reach,
+                           uint64_t seed) {
   open3d::geometry::PointCloud a, b;
   a.points_ = points;
-  b.points_ = SampleSurface(surface, samples, seed, &b.normals_);
+  for (std::size_t i = 0; i < surfaces.size(); ++i) {
+    std::vector<Eigen::Vector3d> normals;
+    const auto samples = SampleSurface(*surfaces[i].mesh, surfaces[i].samples, seed + i, &normals);
+    b.points_.insert(b.points_.end(), samples.begin(), samples.end());
+    b.normals_.insert(b.normals_.end(), normals.begin(), normals.end());
+  }
   const auto result = open3d::pipelines::registration::RegistrationICP(
       a, b, reach, Eigen::Matrix4d::Identity(),
       open3d::pipelines::registration::TransformationEstimationPointToPlane(),

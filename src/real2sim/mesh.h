@@ -79,6 +79,15 @@ std::vector<double> NearestDistances(const std::vector<Eigen::Vector3d>& from,
 // `samples` points drawn on it, from the identity, correspondences within `reach` m.
 core::Pose AlignToSurface(const std::vector<Eigen::Vector3d>& points, const Mesh& surface,
                           double reach, int samples, uint64_t seed);
+// The same against several surfaces at once, each with its own number of samples (a wide table
+// would otherwise take most of them from a small arm).
+struct SampledSurface {
+  const Mesh* mesh;
+  int samples;
+};
+core::Pose AlignToSurfaces(const std::vector<Eigen::Vector3d>& points,
+                           const std::vector<SampledSurface>& surfaces, double reach,
+                           uint64_t seed);
 
 // Whether triangle `t` of `mesh` has (next to) no area: Open3D's distance queries assert on one.
 bool Degenerate(const Mesh& mesh, const Eigen::Vector3i& t);

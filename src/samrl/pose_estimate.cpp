@@ -195,6 +195,11 @@ core::Pose ObjectPoseEstimator::NearestLookAlike(int i, const core::Pose& pose) 
 }
 
 namespace {
+// A face of the fixed geometry is upward when its normal is within ~8 deg of the vertical; the
+// registration takes at most about this many of the frame's points on such faces.
+constexpr double kUpward = 0.99;
+constexpr std::size_t kTopPoints = 20000;
+
 // How far a pose moves: "4.2 mm, 0.42 deg".
 std::string Magnitude(const core::Pose& p) {
   return fmt::format("{:.1f} mm, {:.2f} deg", 1e3 * p.translation.norm(),
@@ -230,12 +235,38 @@ std::vector<Eigen::Vector3d> ObjectPoseEstimator::Foreground(
     // Only points near the surface can pair with it: the ICP looks up the nearest surface sample
     // of every point it is given at every iteration, and most of a frame is far from the arm.
     // The margin beyond the reach is what the ICP may move the points by (a few mm).
+    const double near = options_.register_reach + 0.02;
     const std::vector<double> distance = real2sim::SurfaceDistances(frame_points, target);
     std::vector<Eigen::Vector3d> near_target;
     for (std::size_t i = 0; i < frame_points.size(); ++i)
-      if (distance[i] <= options_.register_reach + 0.02) near_target.push_back(frame_points[i]);
-    moved = real2sim::AlignToSurface(near_target, target, options_.register_reach,
-                                     options_.register_samples, 1);
+      if (distance[i] <= near) near_target.push_back(frame_points[i]);
+    std::vector<real2sim::SampledSurface> surfaces{{&target, options_.register_samples}};
+    real2sim::Mesh tops;
+    if (options_.register_to_robot && options_.register_tops) {
+      // The fixed geometry's upward faces (the table's top) hold the frame's height and tilt; a
+      // point pairs with them only along their normal, so they cannot pull it across the table
+      // the way the table's edges did (a scanned table's edges are only as good as its scan).
+      // From a view that shows little of the arm, the arm alone let the frame turn about it: at
+      // the hidden peg's first looks, 0.2-0.6 deg, which left most of the table off the twin's.
+      tops = real2sim::KeepTriangles(background, [&](std::size_t t) {
+        const Eigen::Vector3i& f = background.triangles[t];
+        const Eigen::Vector3d n = (background.vertices[f[1]] - background.vertices[f[0]])
+                                      .cross(background.vertices[f[2]] - background.vertices[f[0]]);
+        return n.norm() > 0 && n.z() > kUpward * n.norm();
+      });
+      if (!tops.empty()) {
+        const std::vector<double> to_tops = real2sim::SurfaceDistances(frame_points, tops);
+        std::vector<std::size_t> on_tops;
+        for (std::size_t i = 0; i < frame_points.size(); ++i)
+          if (to_tops[i] <= near && distance[i] > near) on_tops.push_back(i);
+        // Every k-th: the ICP's time goes with its points, and a plane needs few.
+        const std::size_t stride = on_tops.size() / kTopPoints + 1;
+        for (std::size_t k = 0; k < on_tops.size(); k += stride)
+          near_target.push_back(frame_points[on_tops[k]]);
+        surfaces.push_back({&tops, options_.register_samples});
+      }
+    }
+    moved = real2sim::AlignToSurfaces(near_target, surfaces, options_.register_reach, 1);
   }
   std::vector<Eigen::Vector3d> points;
   points.reserve(frame_points.size());
@@ -251,9 +282,10 @@ std::vector<Eigen::Vector3d> ObjectPoseEstimator::Foreground(
                            [&](double e) { return e <= options_.background; });
     };
     if (on_background(as_came) > on_background(d)) {
-      spdlog::debug("pose estimate: registration by {} put fewer points on the twin's fixed "
-                    "geometry; not used",
-                    Magnitude(moved));
+      spdlog::debug(
+          "pose estimate: registration by {} put fewer points on the twin's fixed "
+          "geometry; not used",
+          Magnitude(moved));
       moved = core::Pose::Identity();
       points = frame_points;
       d.swap(as_came);
@@ -353,8 +385,7 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model,
   // Score: points the surface explains, less the points inside its outline it does not. `paired`,
   // if given, gets the points within the ICP's last reach of the surface.
   const auto score = [&](const core::Pose& pose, std::vector<Eigen::Vector3d>& local,
-                         std::vector<int>& index,
-                         std::vector<Eigen::Vector3d>* paired = nullptr) {
+                         std::vector<int>& index, std::vector<Eigen::Vector3d>* paired = nullptr) {
     Result result;
     result.pose = pose;
     near(pose, options_.reach, local, index);

@@ -32,9 +32,13 @@ struct PoseEstimateOptions {
   // few mm and mrad, enough to miss a hole): point-to-plane ICP within this reach (m), 0 = not.
   double register_reach = 0.015;
   int register_samples = 60000;
-  // Registered to the robot's own geometry only (exact, where a scanned table or panel is only as
-  // good as its scan), else to all the fixed geometry.
+  // Registered to the robot's own geometry (exact, where a scanned table or panel is only as good
+  // as its scan), else to all the fixed geometry.
   bool register_to_robot = true;
+  // With the robot, also to the fixed geometry's upward faces (the table's top), which pull only
+  // along their normal: they hold the frame's height and tilt where the arm alone, seen from
+  // afar, does not, and cannot pull it across the table.
+  bool register_tops = true;
   double cell = 0.03;  // m: ICP starts at the centroids of foreground points per cell
   // m: starts only this far (in the table's plane) from the object's pose in the twin. Clutter
   // farther away adds no starts: with four boxes on the table and no bound a trial took 6 min.
@@ -60,6 +64,7 @@ struct PoseEstimateOptions {
     a("register_reach", register_reach);
     a("register_samples", register_samples);
     a("register_to_robot", register_to_robot);
+    a("register_tops", register_tops);
     a("cell", cell);
     a("search", search);
     a("min_cell_points", min_cell_points);
