@@ -246,8 +246,8 @@ std::vector<Eigen::Vector3d> ObjectPoseEstimator::Foreground(
       // The fixed geometry's upward faces (the table's top) hold the frame's height and tilt; a
       // point pairs with them only along their normal, so they cannot pull it across the table
       // the way the table's edges did (a scanned table's edges are only as good as its scan).
-      // From a view that shows little of the arm, the arm alone let the frame turn about it: at
-      // the hidden peg's first looks, 0.2-0.6 deg, which left most of the table off the twin's.
+      // From a view that shows little of the arm, the arm alone let the frame turn about it (on
+      // the hidden peg, 0.15-0.6 deg, and more), which left most of the table off the twin's.
       tops = real2sim::KeepTriangles(background, [&](std::size_t t) {
         const Eigen::Vector3i& f = background.triangles[t];
         const Eigen::Vector3d n = (background.vertices[f[1]] - background.vertices[f[0]])
