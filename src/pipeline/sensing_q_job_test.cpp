@@ -43,9 +43,8 @@ int SuccessesFromView(const sim::TaskSpec& twin, const core::Pose& view, int epi
 // Q's view 3/6 at stop 36, 6/6 at stop 44 (the expert searching for the hole since stop 43); 0/6
 // from the task camera's. Since stop 52 (a registration that slid is not used) the random views
 // succeed in most of the 48 (42-43 at stop 77), and 15 points over them is out of reach: the Q's
-// view has to be one
-// that works (5 or 6 of 6, at least the random views' rate), and the task camera's, behind the
-// panel, not.
+// view has to be one that works (5 or 6 of 6, at least the random views' rate), and the task
+// camera's, behind the panel, not.
 TEST(TrainSensingQ, ItsQsViewSucceedsMoreOftenThanRandomViews) {
   learn::PinMathThreads(1);
   const sim::TaskSpec twin = sim::LoadTaskSpec("peg_insertion_occluded");
