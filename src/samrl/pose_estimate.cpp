@@ -248,11 +248,14 @@ std::vector<Eigen::Vector3d> ObjectPoseEstimator::Foreground(
       // the way the table's edges did (a scanned table's edges are only as good as its scan).
       // From a view that shows little of the arm, the arm alone let the frame turn about it (on
       // the hidden peg, 0.15-0.6 deg, and more), which left most of the table off the twin's.
+      // (`background` has the arm too: its own level faces come along, sampled twice; points near
+      // the arm are already paired with it and are not taken again below.)
       tops = real2sim::KeepTriangles(background, [&](std::size_t t) {
         const Eigen::Vector3i& f = background.triangles[t];
+        if (real2sim::Degenerate(background, f)) return false;
         const Eigen::Vector3d n = (background.vertices[f[1]] - background.vertices[f[0]])
                                       .cross(background.vertices[f[2]] - background.vertices[f[0]]);
-        return n.norm() > 0 && n.z() > kUpward * n.norm();
+        return n.z() > kUpward * n.norm();
       });
       if (!tops.empty()) {
         const std::vector<double> to_tops = real2sim::SurfaceDistances(frame_points, tops);

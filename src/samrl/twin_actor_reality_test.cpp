@@ -242,13 +242,13 @@ TEST(PoseEstimate, TheTableHoldsTheTiltTheArmAloneLeavesFree) {
     const reality::RgbdFrame f =
         scene.proxy.Capture({OrbitPose(ObjectsMount(*scene.task), -0.78, 1.00),
                              ScaleIntrinsics(scene.camera.intrinsics, 8)});
-    const double with =
-        SiteError(*scene.task,
-                  with_table.Estimate(with_table.Foreground(FramePoints(f), o.q, o.gripper_width)),
-                  hidden, "hole_top");
-    const double alone = SiteError(
-        *scene.task, without.Estimate(without.Foreground(FramePoints(f), o.q, o.gripper_width)),
-        hidden, "hole_top");
+    const auto hole_off = [&](ObjectPoseEstimator& estimator) {
+      return SiteError(
+          *scene.task,
+          estimator.Estimate(estimator.Foreground(FramePoints(f), o.q, o.gripper_width)), hidden,
+          "hole_top");
+    };
+    const double with = hole_off(with_table), alone = hole_off(without);
     std::printf(
         "frame %d: the hole %.1f mm off registered with the table, %.1f mm with the arm alone\n",
         frame, 1e3 * with, 1e3 * alone);
