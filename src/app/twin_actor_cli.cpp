@@ -37,6 +37,12 @@ void TwinActorCli::Add(CLI::App* c) {
                 "the default before stop 77) or fixed (all of the twin's fixed geometry: the "
                 "table, panels)")
       ->check(CLI::IsMember({"robot-and-table", "robot", "fixed"}));
+  c->add_option("--register-min-hold", register_min_hold,
+                "twin actor: the registration moves the frame only along the directions its "
+                "pairs hold by at least this many pairs that hold fully (an arm seen end-on "
+                "hardly holds a turn about it, a table only its height and tilt); 0: Open3D's "
+                "ICP, which slides along the others (before stop 78)")
+      ->check(CLI::NonNegativeNumber);
   c->add_option("--capture-scale", capture_scale,
                 "twin actor: the frame's resolution, as a multiple of the task camera's")
       ->check(CLI::Range(1, 16));
@@ -121,6 +127,7 @@ TwinActorOnRobot::TwinActorOnRobot(reality::Robot& robot, const sim::TaskSpec& t
   samrl::PoseEstimateOptions estimate;
   estimate.register_to_robot = cli.register_to != "fixed";
   estimate.register_tops = cli.register_to == "robot-and-table";
+  estimate.register_min_hold = cli.register_min_hold;
   estimate.settle = cli.settle;
   actor_ = std::make_unique<samrl::TwinActor>(twin_, robot, look_, robot.Info().has_success_oracle,
                                               estimate, core::Pose{}, cli.relook);
@@ -135,6 +142,7 @@ TwinActorOnRobot::TwinActorOnRobot(reality::Robot& robot, const sim::TaskSpec& t
   if (q_.net) header_["q_hash"] = q_.hash;
   header_["settle"] = cli.settle;
   header_["register_to"] = cli.register_to;
+  header_["register_min_hold"] = cli.register_min_hold;
   header_["max_looks"] = cli.relook.max_looks;
   header_["moved"] = cli.relook.moved;
   header_["max_move"] = cli.relook.max_move;

@@ -20,15 +20,16 @@ namespace twinforge::app {
 struct TwinActorCli {
   std::string actor = "policy";  // what acts: a --policy file, or the twin actor
   std::string look = "active", register_to = "robot-and-table";
+  double register_min_hold = samrl::PoseEstimateOptions{}.register_min_hold;
   std::string q;             // --look q: the sensing-aware Q (train samrl's q.pt)
   std::string actor_policy;  // the twin actor acts with this state policy (train imitate's)
   int capture_scale = 8;
   double settle = samrl::PoseEstimateOptions{}.settle;  // m: each fit settled (0: not)
   samrl::RelookOptions relook;
 
-  // --actor, --actor-policy, --look, --q, --register-to, --capture-scale, --settle, --max-looks,
-  // --moved, --look-when-blocked, --moved-when-blocked, --look-when-unseen, --occluders,
-  // --max-move.
+  // --actor, --actor-policy, --look, --q, --register-to, --register-min-hold, --capture-scale,
+  // --settle, --max-looks, --moved, --look-when-blocked, --moved-when-blocked, --look-when-unseen,
+  // --occluders, --max-move.
   void Add(CLI::App* command);
   // Throws when the options disagree, with each other or with `policy` (the --policy file:
   // needed by --actor policy, refused by --actor twin; --q goes with --look q); `command` names

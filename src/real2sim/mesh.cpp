@@ -3,12 +3,15 @@
 #include <open3d/Open3D.h>
 #include <open3d/t/geometry/RaycastingScene.h>
 
+#include <Eigen/Eigenvalues>
 #include <numeric>
 #include <tuple>
 
 #include "core/error.h"
 #include "core/fs.h"
+#include "core/log.h"
 #include "core/rng.h"
+#include "core/se3.h"
 #include "sim/geom_scene.h"
 
 namespace twinforge::real2sim {
@@ -266,9 +269,70 @@ core::Pose AlignToSurface(const std::vector<Eigen::Vector3d>& points, const Mesh
   return AlignToSurfaces(points, {{&surface, samples}}, reach, seed);
 }
 
+namespace {
+
+// Point-to-plane ICP whose every step moves only along the directions its pairs hold by
+// `min_hold` or more (Zhang, Kaess and Singh 2016's degeneracy-aware solution, at each step).
+core::Pose AlignHeld(const open3d::geometry::PointCloud& source,
+                     const open3d::geometry::PointCloud& target, double reach, double min_hold) {
+  using Vector6d = Eigen::Matrix<double, 6, 1>;
+  using Matrix6d = Eigen::Matrix<double, 6, 6>;
+  const open3d::geometry::KDTreeFlann tree(target);
+  core::Pose motion = core::Pose::Identity();
+  std::vector<int> index(1);
+  std::vector<double> d2(1);
+  std::vector<std::pair<Eigen::Vector3d, int>> pairs;
+  int held = 0;
+  for (int iteration = 0; iteration < 50; ++iteration) {
+    pairs.clear();
+    Eigen::Vector3d c = Eigen::Vector3d::Zero();
+    for (const auto& a : source.points_) {
+      const Eigen::Vector3d p = motion * a;
+      if (tree.SearchHybrid(p, reach, 1, index, d2) > 0) {
+        pairs.emplace_back(p, index[0]);
+        c += p;
+      }
+    }
+    if (pairs.size() < 6) break;
+    c /= double(pairs.size());
+    double spread = 0;
+    for (const auto& [p, j] : pairs) spread += (p - c).squaredNorm();
+    const double length = std::max(std::sqrt(spread / double(pairs.size())), 1e-3);
+    Matrix6d information = Matrix6d::Zero();
+    Vector6d gradient = Vector6d::Zero();
+    for (const auto& [p, j] : pairs) {
+      const Eigen::Vector3d& n = target.normals_[j];
+      Vector6d jac;
+      jac << (p - c).cross(n) / length, n;
+      information += jac * jac.transpose();
+      gradient += jac * n.dot(p - target.points_[j]);
+    }
+    const Eigen::SelfAdjointEigenSolver<Matrix6d> eigen(information);
+    Vector6d step = Vector6d::Zero();
+    held = 0;
+    for (int k = 0; k < 6; ++k)
+      if (eigen.eigenvalues()(k) >= min_hold && eigen.eigenvalues()(k) > 0) {
+        step -= eigen.eigenvectors().col(k).dot(gradient) / eigen.eigenvalues()(k) *
+                eigen.eigenvectors().col(k);
+        ++held;
+      }
+    // A turn about c and a shift of c.
+    core::Pose update;
+    update.rotation = core::ExpMap(step.head<3>() / length);
+    update.translation = c + step.tail<3>() - update.rotation * c;
+    motion = update * motion;
+    if (step.norm() < 1e-8) break;
+  }
+  spdlog::debug("align: {} pairs held {} of 6 directions by {} or more", pairs.size(), held,
+                min_hold);
+  return motion;
+}
+
+}  // namespace
+
 core::Pose AlignToSurfaces(const std::vector<Eigen::Vector3d>& points,
-                           const std::vector<SampledSurface>& surfaces, double reach,
-                           uint64_t seed) {
+                           const std::vector<SampledSurface>& surfaces, double reach, uint64_t seed,
+                           double min_hold) {
   open3d::geometry::PointCloud a, b;
   a.points_ = points;
   for (std::size_t i = 0; i < surfaces.size(); ++i) {
@@ -277,6 +341,7 @@ core::Pose AlignToSurfaces(const std::vector<Eigen::Vector3d>& points,
     b.points_.insert(b.points_.end(), samples.begin(), samples.end());
     b.normals_.insert(b.normals_.end(), normals.begin(), normals.end());
   }
+  if (min_hold > 0) return AlignHeld(a, b, reach, min_hold);
   const auto result = open3d::pipelines::registration::RegistrationICP(
       a, b, reach, Eigen::Matrix4d::Identity(),
       open3d::pipelines::registration::TransformationEstimationPointToPlane(),

@@ -85,9 +85,18 @@ struct SampledSurface {
   const Mesh* mesh;
   int samples;
 };
+//
+// `min_hold` > 0 moves the points only along the directions the pairs hold. At each step the
+// pairs resist a small motion along a direction of the twist (about their centroid, a turn
+// scaled by their spread, so both are in m) by the sum over pairs of the squared motion along
+// each pair's normal, per unit motion: the eigenvalues of the pairs' information matrix, in
+// pairs that hold fully. A step leaves out the directions held by fewer than `min_hold` (a plane
+// holds only its normal; an arm seen end-on hardly holds a turn about it), so the points stay
+// as they came along those (Zhang, Kaess and Singh 2016). Else Open3D's ICP, which slides along
+// them.
 core::Pose AlignToSurfaces(const std::vector<Eigen::Vector3d>& points,
-                           const std::vector<SampledSurface>& surfaces, double reach,
-                           uint64_t seed);
+                           const std::vector<SampledSurface>& surfaces, double reach, uint64_t seed,
+                           double min_hold = 0);
 
 // Whether triangle `t` of `mesh` has (next to) no area: Open3D's distance queries assert on one.
 bool Degenerate(const Mesh& mesh, const Eigen::Vector3i& t);

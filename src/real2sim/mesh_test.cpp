@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <random>
 
 namespace twinforge::real2sim {
@@ -115,27 +116,67 @@ TEST(Mesh, SurfaceDistancesSkipTrianglesWithoutArea) {
 }
 
 // Points of a corner (a floor and two walls) moved by 5 mm and 2 degrees come back onto it.
+// Appends the rectangle a, b, c, d (two triangles) to `mesh`.
+void AddQuad(Mesh& mesh, Eigen::Vector3d a, Eigen::Vector3d b, Eigen::Vector3d c,
+             Eigen::Vector3d d) {
+  const int n = int(mesh.vertices.size());
+  mesh.vertices.insert(mesh.vertices.end(), {a, b, c, d});
+  mesh.triangles.push_back({n, n + 1, n + 2});
+  mesh.triangles.push_back({n, n + 2, n + 3});
+}
+
+// Points of a corner (a floor and two walls) moved by 5 mm and 2 degrees come back onto it, with
+// Open3D's ICP and with the one that moves only along held directions (the corner holds all).
 TEST(Mesh, AlignToSurfaceUndoesASmallRigidMotion) {
   Mesh corner;
-  const auto quad = [&](Eigen::Vector3d a, Eigen::Vector3d b, Eigen::Vector3d c,
-                        Eigen::Vector3d d) {
-    const int n = int(corner.vertices.size());
-    corner.vertices.insert(corner.vertices.end(), {a, b, c, d});
-    corner.triangles.push_back({n, n + 1, n + 2});
-    corner.triangles.push_back({n, n + 2, n + 3});
-  };
-  quad({0, 0, 0}, {0.3, 0, 0}, {0.3, 0.3, 0}, {0, 0.3, 0});
-  quad({0, 0, 0}, {0, 0.3, 0}, {0, 0.3, 0.2}, {0, 0, 0.2});
-  quad({0, 0, 0}, {0, 0, 0.2}, {0.3, 0, 0.2}, {0.3, 0, 0});
+  AddQuad(corner, {0, 0, 0}, {0.3, 0, 0}, {0.3, 0.3, 0}, {0, 0.3, 0});
+  AddQuad(corner, {0, 0, 0}, {0, 0.3, 0}, {0, 0.3, 0.2}, {0, 0, 0.2});
+  AddQuad(corner, {0, 0, 0}, {0, 0, 0.2}, {0.3, 0, 0.2}, {0.3, 0, 0});
   const std::vector<Eigen::Vector3d> on = SampleSurface(corner, 3000, 3);
   const core::Pose motion{Eigen::Vector3d(0.004, -0.003, 0.002),
                           core::FromRollPitchYaw(0.01, -0.02, 0.035)};
   std::vector<Eigen::Vector3d> moved;
   for (const auto& p : on) moved.push_back(motion * p);
-  const core::Pose back = AlignToSurface(moved, corner, 0.02, 20000, 5);
-  double worst = 0;
-  for (const auto& p : on) worst = std::max(worst, ((back * motion) * p - p).norm());
-  EXPECT_LT(worst, 5e-4);
+  for (const double min_hold : {0.0, 100.0}) {
+    const core::Pose back = AlignToSurfaces(moved, {{&corner, 20000}}, 0.02, 5, min_hold);
+    double worst = 0;
+    for (const auto& p : on) worst = std::max(worst, ((back * motion) * p - p).norm());
+    EXPECT_LT(worst, 5e-4) << "min_hold " << min_hold;
+  }
+}
+
+// A floor and a wall along y hold every direction but a slide along y. A small end wall, which
+// the points show 5 mm from where the surface has it (say, a scanned edge), holds that slide
+// weakly: Open3D's ICP follows it, and the points slide 5 mm. Held by a few dozen points, below
+// `min_hold`, the slide is left as the points came; the rest is undone as before.
+TEST(Mesh, AlignToSurfacesDoesNotSlideAlongWhatFewPairsHold) {
+  Mesh trough, shown;
+  AddQuad(trough, {0, 0, 0}, {0.3, 0, 0}, {0.3, 0.3, 0}, {0, 0.3, 0});
+  AddQuad(trough, {0, 0, 0}, {0, 0.3, 0}, {0, 0.3, 0.2}, {0, 0, 0.2});
+  shown = trough;
+  AddQuad(trough, {0, 0.1, 0}, {0, 0.1, 0.02}, {0.02, 0.1, 0.02}, {0.02, 0.1, 0});
+  AddQuad(shown, {0, 0.105, 0}, {0, 0.105, 0.02}, {0.02, 0.105, 0.02}, {0.02, 0.105, 0});
+  const std::vector<Eigen::Vector3d> on = SampleSurface(shown, 6000, 3);
+  // A turn about y moves no point along y: the slide the floor and wall leave free is 2 mm.
+  const core::Pose motion{Eigen::Vector3d(0.003, 0.002, -0.002),
+                          core::FromRollPitchYaw(0, -0.015, 0)};
+  std::vector<Eigen::Vector3d> moved;
+  for (const auto& p : on) moved.push_back(motion * p);
+  // Where the motion and the registration put the floor's far corner, against where it is.
+  const Eigen::Vector3d far(0.3, 0.3, 0);
+  const auto error = [&](double min_hold) {
+    const core::Pose back = AlignToSurfaces(moved, {{&trough, 40000}}, 0.02, 5, min_hold);
+    return Eigen::Vector3d((back * motion) * far - far);
+  };
+  const Eigen::Vector3d slid = error(0), held = error(100);
+  std::printf("the far corner after Open3D's ICP: %.2f %.2f %.2f mm; held: %.2f %.2f %.2f mm\n",
+              1e3 * slid.x(), 1e3 * slid.y(), 1e3 * slid.z(), 1e3 * held.x(), 1e3 * held.y(),
+              1e3 * held.z());
+  EXPECT_LT(slid.y(), -0.004);  // pulled 5 mm toward the end wall the points show
+  EXPECT_LT(std::abs(slid.x()) + std::abs(slid.z()), 5e-4);
+  // Held: x and z undone, y left where the motion put it.
+  EXPECT_LT(std::abs(held.x()) + std::abs(held.z()), 5e-4);
+  EXPECT_NEAR(held.y(), 0.002, 5e-4);
 }
 
 }  // namespace

@@ -171,6 +171,7 @@ RgbdFrame ProxyReality::Capture(const CaptureRequest& request) {
       Eigen::Vector3d(draw[0], draw[1], draw[2]) * e.position_sigma,
       core::FromRollPitchYaw(e.rotation_sigma * draw[3], e.rotation_sigma * draw[4],
                              e.rotation_sigma * draw[5])};
+  last_capture_error_ = error;
   scan_caster_->set_pose(request.pose * error);
   RgbdFrame frame;
   frame.camera = "scan";

@@ -166,6 +166,9 @@ class ProxyReality : public Robot {
   // For graders only: the hidden scene now, by name: each task joint's value, each task object's
   // position, the gripper's opening and the tool's position (robot base frame, m or rad).
   nlohmann::json GraderState() const;
+  // For graders and tests only: how far the last Capture's camera was from where it was asked to
+  // be, in the camera's frame (the true camera is the requested pose times this).
+  const core::Pose& last_capture_error() const { return last_capture_error_; }
 
  private:
   // `hidden_physics`: the world's controller changes the task's arm physics (a world), or the
@@ -184,6 +187,7 @@ class ProxyReality : public Robot {
   std::vector<float> depth_;
   std::vector<int> geom_;
   core::Rng scan_rng_;
+  core::Pose last_capture_error_ = core::Pose::Identity();
   double clock_ = 0;
 };
 

@@ -269,7 +269,8 @@ std::vector<Eigen::Vector3d> ObjectPoseEstimator::Foreground(
         surfaces.push_back({&tops, options_.register_samples});
       }
     }
-    moved = real2sim::AlignToSurfaces(near_target, surfaces, options_.register_reach, 1);
+    moved = real2sim::AlignToSurfaces(near_target, surfaces, options_.register_reach, 1,
+                                      options_.register_min_hold);
   }
   std::vector<Eigen::Vector3d> points;
   points.reserve(frame_points.size());

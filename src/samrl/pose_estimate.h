@@ -39,6 +39,12 @@ struct PoseEstimateOptions {
   // along their normal: they hold the frame's height and tilt where the arm alone, seen from
   // afar, does not, and cannot pull it across the table.
   bool register_tops = true;
+  // The registration moves the frame only along the directions its pairs hold by at least this
+  // many pairs that hold fully (real2sim::AlignToSurfaces); 0: Open3D's ICP, which slides along
+  // the others. Seen from the hidden peg's side, an arm far off held a direction by 0-2 pairs
+  // and the frame slid 5-80 mm along it. From the active look's first view some direction is
+  // held by 30-100 pairs, and rightly: leaving out under 100 left those frames 1-2 mm off.
+  double register_min_hold = 30;
   double cell = 0.03;  // m: ICP starts at the centroids of foreground points per cell
   // m: starts only this far (in the table's plane) from the object's pose in the twin. Clutter
   // farther away adds no starts: with four boxes on the table and no bound a trial took 6 min.
@@ -65,6 +71,7 @@ struct PoseEstimateOptions {
     a("register_samples", register_samples);
     a("register_to_robot", register_to_robot);
     a("register_tops", register_tops);
+    a("register_min_hold", register_min_hold);
     a("cell", cell);
     a("search", search);
     a("min_cell_points", min_cell_points);

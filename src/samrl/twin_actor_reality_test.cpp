@@ -259,6 +259,83 @@ TEST(PoseEstimate, TheTableHoldsTheTiltTheArmAloneLeavesFree) {
   EXPECT_GT(sum_without / 3, 0.0025);
 }
 
+// How far (m) the registration of a frame of the hidden peg (scene `s` at level 1, the movable
+// camera at `azimuth`, `elevation` about the objects) leaves the block from where it is, with
+// each of two estimators; and as the frame came.
+struct BlockOff {
+  double came, first, second;
+};
+BlockOff BlockAfterRegistration(Scene& scene, int s, double azimuth, double elevation,
+                                ObjectPoseEstimator& first, ObjectPoseEstimator& second) {
+  const Eigen::Vector3d block(0.56, 0.10, 0.04);  // robot frame, m
+  const reality::Observation o = scene.proxy.Reset({core::MixSeed(5000, 1000 + s), 1});
+  const core::Pose asked = OrbitPose(ObjectsMount(*scene.task), azimuth, elevation);
+  const reality::RgbdFrame f =
+      scene.proxy.Capture({asked, ScaleIntrinsics(scene.camera.intrinsics, 8)});
+  // Where the frame shows the block, and where the registration then puts it.
+  const core::Pose error = asked * scene.proxy.last_capture_error() * asked.Inverse();
+  const Eigen::Vector3d shown = error.Inverse() * block;
+  const auto off = [&](ObjectPoseEstimator& estimator) {
+    core::Pose moved;
+    estimator.Foreground(FramePoints(f), o.q, o.gripper_width, &moved);
+    return (moved * shown - block).norm();
+  };
+  return {(shown - block).norm(), off(first), off(second)};
+}
+
+PoseEstimateOptions Open3dIcp() {
+  PoseEstimateOptions o;
+  o.register_min_hold = 0;
+  return o;
+}
+
+// Seen from the side, the arm (resting behind the objects) holds some directions of the frame's
+// motion by a handful of pairs, and Open3D's ICP slid the frame along them, 5-7 mm at the block.
+// The registration now moves the frame only along the directions its pairs hold (stop 78); along
+// the others the frame keeps the camera's own error (2-5 mm here).
+TEST(PoseEstimate, ASideViewOfTheArmDoesNotSlideTheFrame) {
+  learn::PinMathThreads(1);
+  Scene scene("peg_insertion_hidden");
+  ObjectPoseEstimator held(scene.task, scene.spec.objects),
+      slid(scene.task, scene.spec.objects, Open3dIcp());
+  double held_sum = 0, held_worst = 0, slid_sum = 0, slid_worst = 0;
+  int frames = 0;
+  for (int s = 0; s < 4; ++s)
+    for (const auto& [azimuth, elevation] : {std::pair{0.8, 0.85}, std::pair{1.6, 1.15}}) {
+      const auto [came, h, d] = BlockAfterRegistration(scene, s, azimuth, elevation, held, slid);
+      std::printf(
+          "scene %d, view (%.2f, %.2f): the block %.1f mm off as it came, %.1f held, "
+          "%.1f with Open3D's ICP\n",
+          s, azimuth, elevation, 1e3 * came, 1e3 * h, 1e3 * d);
+      held_sum += h;
+      slid_sum += d;
+      held_worst = std::max(held_worst, h);
+      slid_worst = std::max(slid_worst, d);
+      ++frames;
+    }
+  EXPECT_LT(held_worst, 0.004);
+  EXPECT_LT(held_sum / frames, 0.0026);
+  EXPECT_GT(slid_worst, 0.006);
+  EXPECT_GT(slid_sum / frames, 0.0035);
+}
+
+// From the active look's first view the arm holds every direction by dozens of pairs or more,
+// and the registration is Open3D's to the micrometre. Leaving out directions held by fewer than
+// 100 pairs (a first try) left these frames 1.2-2.2 mm off where Open3D's ICP left 0.4-0.5.
+TEST(PoseEstimate, TheFirstLooksViewLeavesNothingOut) {
+  learn::PinMathThreads(1);
+  Scene scene("peg_insertion_hidden");
+  ObjectPoseEstimator held(scene.task, scene.spec.objects),
+      open3d(scene.task, scene.spec.objects, Open3dIcp());
+  for (const int s : {2, 6}) {
+    const auto [came, h, o] = BlockAfterRegistration(scene, s, -0.78, 1.00, held, open3d);
+    std::printf("scene %d: the block %.2f mm off as it came, %.2f held, %.2f with Open3D's ICP\n",
+                s, 1e3 * came, 1e3 * h, 1e3 * o);
+    EXPECT_LT(h, 0.0006);
+    EXPECT_NEAR(h, o, 5e-5);
+  }
+}
+
 // The twin's expert on the estimate puts the peg in the proxy's hole.
 TEST(TwinActorOnReality, InsertsThePegWhereTheEstimateSaysTheHoleIs) {
   learn::PinMathThreads(1);
