@@ -320,8 +320,9 @@ TEST(PoseEstimate, ASideViewOfTheArmDoesNotSlideTheFrame) {
 }
 
 // From the active look's first view the arm holds every direction by dozens of pairs or more,
-// and the registration is Open3D's to the micrometre. Leaving out directions held by fewer than
-// 100 pairs (a first try) left these frames 1.2-2.2 mm off where Open3D's ICP left 0.4-0.5.
+// and the registration agrees with Open3D's to 0.05 mm at the block. Leaving out directions held
+// by fewer than 100 pairs (a first try) left these frames 1.2-2.2 mm off where Open3D's ICP left
+// 0.4-0.5.
 TEST(PoseEstimate, TheFirstLooksViewLeavesNothingOut) {
   learn::PinMathThreads(1);
   Scene scene("peg_insertion_hidden");
