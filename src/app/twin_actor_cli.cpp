@@ -39,9 +39,10 @@ void TwinActorCli::Add(CLI::App* c) {
       ->check(CLI::IsMember({"robot-and-table", "robot", "fixed"}));
   c->add_option("--register-min-hold", register_min_hold,
                 "twin actor: the registration moves the frame only along the directions its "
-                "pairs hold by at least this many pairs that hold fully (an arm seen end-on "
-                "hardly holds a turn about it, a table only its height and tilt); 0: Open3D's "
-                "ICP, which slides along the others (before stop 78)")
+                "pairs hold by at least this much (about a count of pairs pulled along their "
+                "normals; an arm seen end-on hardly holds a turn about it, a table only its "
+                "height and tilt); tuned at --capture-scale 8; 0: Open3D's ICP, which slides "
+                "along the others (before stop 78)")
       ->check(CLI::NonNegativeNumber);
   c->add_option("--capture-scale", capture_scale,
                 "twin actor: the frame's resolution, as a multiple of the task camera's")

@@ -85,15 +85,18 @@ struct SampledSurface {
   const Mesh* mesh;
   int samples;
 };
-//
+
 // `min_hold` > 0 moves the points only along the directions the pairs hold. At each step the
 // pairs resist a small motion along a direction of the twist (about their centroid, a turn
 // scaled by their spread, so both are in m) by the sum over pairs of the squared motion along
-// each pair's normal, per unit motion: the eigenvalues of the pairs' information matrix, in
-// pairs that hold fully. A step leaves out the directions held by fewer than `min_hold` (a plane
-// holds only its normal; an arm seen end-on hardly holds a turn about it), so the points stay
-// as they came along those (Zhang, Kaess and Singh 2016). Else Open3D's ICP, which slides along
-// them.
+// each pair's normal, per unit motion: the eigenvalues of the pairs' information matrix. A pair
+// moved along its normal by the whole motion adds 1 (for a turn, a pair farther out than the
+// spread adds more). A step leaves out the directions held by less than `min_hold` (a plane
+// holds its height and tilt, not a slide or a turn in it; an arm seen end-on hardly holds a
+// turn about it), so the points keep the motion they came with along those, as of that step
+// (Zhang, Kaess and Singh 2016). The directions are found again at every step. The threshold is
+// a count of points, so it goes with how densely the points sample the surfaces. 0: Open3D's
+// ICP, which slides along them.
 core::Pose AlignToSurfaces(const std::vector<Eigen::Vector3d>& points,
                            const std::vector<SampledSurface>& surfaces, double reach, uint64_t seed,
                            double min_hold = 0);

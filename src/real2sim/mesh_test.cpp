@@ -115,7 +115,6 @@ TEST(Mesh, SurfaceDistancesSkipTrianglesWithoutArea) {
   EXPECT_NEAR(SurfaceDistances({{0.05, 0.05, 0.003}}, square)[0], 0.003, 1e-6);
 }
 
-// Points of a corner (a floor and two walls) moved by 5 mm and 2 degrees come back onto it.
 // Appends the rectangle a, b, c, d (two triangles) to `mesh`.
 void AddQuad(Mesh& mesh, Eigen::Vector3d a, Eigen::Vector3d b, Eigen::Vector3d c,
              Eigen::Vector3d d) {
@@ -147,7 +146,7 @@ TEST(Mesh, AlignToSurfaceUndoesASmallRigidMotion) {
 
 // A floor and a wall along y hold every direction but a slide along y. A small end wall, which
 // the points show 5 mm from where the surface has it (say, a scanned edge), holds that slide
-// weakly: Open3D's ICP follows it, and the points slide 5 mm. Held by a few dozen points, below
+// weakly: Open3D's ICP follows it, and the points slide 5 mm. Held by about 16 points, below
 // `min_hold`, the slide is left as the points came; the rest is undone as before.
 TEST(Mesh, AlignToSurfacesDoesNotSlideAlongWhatFewPairsHold) {
   Mesh trough, shown;
