@@ -40,10 +40,11 @@ struct PoseEstimateOptions {
   // afar, does not, and cannot pull it across the table.
   bool register_tops = true;
   // The registration moves the frame only along the directions its pairs hold by at least this
-  // many pairs that hold fully (real2sim::AlignToSurfaces); 0: Open3D's ICP, which slides along
-  // the others. Seen from the hidden peg's side, an arm far off held a direction by 0-2 pairs
-  // and the frame slid 5-80 mm along it. From the active look's first view some direction is
-  // held by 30-100 pairs, and rightly: leaving out under 100 left those frames 1-2 mm off.
+  // much, about a count of pairs pulled along their normals (real2sim::AlignToSurfaces says how a
+  // pair counts); 0: Open3D's ICP, which slides along the others. Seen from the hidden peg's
+  // side, an arm far off held a direction by 0-2 pairs and the frame slid 5-80 mm along it. From
+  // the active look's first view some direction is held by 30-100 pairs, and rightly: leaving
+  // out under 100 left those frames 1-2 mm off.
   double register_min_hold = 30;
   double cell = 0.03;  // m: ICP starts at the centroids of foreground points per cell
   // m: starts only this far (in the table's plane) from the object's pose in the twin. Clutter
