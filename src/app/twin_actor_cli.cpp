@@ -74,6 +74,18 @@ void TwinActorCli::Add(CLI::App* c) {
   c->add_flag("--look-when-unseen,!--no-look-when-unseen", relook.look_when_unseen,
               "twin actor: when the first look does not see an object (hidden, out of view), "
               "look again at once if looks remain (default on)");
+  measure_held = c->add_flag(
+      "--measure-held,!--no-measure-held", relook.measure_held,
+      "twin actor: at each look while holding an object, find it in the hand in the same "
+      "frames as the rest and carry it so (the first look's frame error stays with a "
+      "held object while later looks put the others right; default on with --look active "
+      "or q, off with a fixed view)");
+  refine = c->add_flag(
+      "--refine,!--no-refine", relook.refine,
+      "twin actor: an object a later look sees is believed where that look put it, even "
+      "when it moved less than --moved (only a move of --moved has the step done again; "
+      "default on with --look active or q, off with a fixed view, whose later looks have "
+      "the arm in the way)");
   c->add_flag("--occluders,!--no-occluders", relook.occluders,
               "twin actor: tell each look what the trial's earlier frames showed that no object "
               "explains (clutter, a panel the twin has elsewhere), so an active look chooses "
@@ -82,6 +94,14 @@ void TwinActorCli::Add(CLI::App* c) {
                 "twin actor: m beyond which an object found is taken for a misfit (clutter taken "
                 "for it), not a push, and ignored")
       ->check(CLI::PositiveNumber);
+}
+
+samrl::RelookOptions TwinActorCli::Relook() const {
+  samrl::RelookOptions r = relook;
+  const bool chooses = look == "active" || look == "q";
+  if (!measure_held || measure_held->count() == 0) r.measure_held = chooses;
+  if (!refine || refine->count() == 0) r.refine = chooses;
+  return r;
 }
 
 void TwinActorCli::Check(const std::string& command, const std::string& policy) const {
@@ -94,7 +114,7 @@ void TwinActorCli::Check(const std::string& command, const std::string& policy) 
     throw core::Error(look == "q" ? command + " --look q: needs --q FILE (train samrl's q.pt)"
                                   : command + " --q: goes with --look q");
   // The flags' values meet the checks a config file's would (--moved below --max-move, ...).
-  core::Validate(relook, command + "'s twin actor options");
+  core::Validate(Relook(), command + "'s twin actor options");
 }
 
 TwinActorOnRobot::TwinActorOnRobot(reality::Robot& robot, const sim::TaskSpec& task,
@@ -125,13 +145,14 @@ TwinActorOnRobot::TwinActorOnRobot(reality::Robot& robot, const sim::TaskSpec& t
                 : samrl::ActiveLook(robot, *geometry_, task.objects, mount, search_camera, capture,
                                     search, seed);
   }
+  const samrl::RelookOptions relook = cli.Relook();
   samrl::PoseEstimateOptions estimate;
   estimate.register_to_robot = cli.register_to != "fixed";
   estimate.register_tops = cli.register_to == "robot-and-table";
   estimate.register_min_hold = cli.register_min_hold;
   estimate.settle = cli.settle;
   actor_ = std::make_unique<samrl::TwinActor>(twin_, robot, look_, robot.Info().has_success_oracle,
-                                              estimate, core::Pose{}, cli.relook);
+                                              estimate, core::Pose{}, relook);
   identity_ = {{"actor", "twin"}, {"twin_hash", pipeline::TwinFingerprint(task)}};
   if (!cli.actor_policy.empty()) {
     actor_->set_policy(learn::LoadStateActor(cli.actor_policy, *twin_));
@@ -144,14 +165,16 @@ TwinActorOnRobot::TwinActorOnRobot(reality::Robot& robot, const sim::TaskSpec& t
   header_["settle"] = cli.settle;
   header_["register_to"] = cli.register_to;
   header_["register_min_hold"] = cli.register_min_hold;
-  header_["max_looks"] = cli.relook.max_looks;
-  header_["moved"] = cli.relook.moved;
-  header_["max_move"] = cli.relook.max_move;
-  if (cli.relook.measure_reach) header_["measure_reach"] = true;
-  header_["look_when_blocked"] = cli.relook.look_when_blocked;
-  header_["moved_when_blocked"] = cli.relook.moved_when_blocked;
-  header_["look_when_unseen"] = cli.relook.look_when_unseen;
-  header_["occluders"] = cli.relook.occluders;
+  header_["max_looks"] = relook.max_looks;
+  header_["moved"] = relook.moved;
+  header_["max_move"] = relook.max_move;
+  if (relook.measure_reach) header_["measure_reach"] = true;
+  header_["look_when_blocked"] = relook.look_when_blocked;
+  header_["moved_when_blocked"] = relook.moved_when_blocked;
+  header_["look_when_unseen"] = relook.look_when_unseen;
+  header_["occluders"] = relook.occluders;
+  header_["measure_held"] = relook.measure_held;
+  header_["refine"] = relook.refine;
   header_["capture"] = {capture.width, capture.height};
 }
 

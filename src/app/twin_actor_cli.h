@@ -26,10 +26,17 @@ struct TwinActorCli {
   int capture_scale = 8;
   double settle = samrl::PoseEstimateOptions{}.settle;  // m: each fit settled (0: not)
   samrl::RelookOptions relook;
+  CLI::Option *measure_held = nullptr, *refine = nullptr;  // given on the command line or not
+
+  // `relook` as the actor takes it: --measure-held and --refine, unless given, on where the look
+  // chooses its view around the arm (active, q) and off for a fixed view. Seen by a fixed camera
+  // from the front, the arm over the block hid it at the look from over the hole, and a refined
+  // fit there was worse than the one it replaced (peg_insertion, level 3: 0.5 -> 2.2 mm).
+  samrl::RelookOptions Relook() const;
 
   // --actor, --actor-policy, --look, --q, --register-to, --register-min-hold, --capture-scale,
   // --settle, --max-looks, --moved, --look-when-blocked, --moved-when-blocked, --look-when-unseen,
-  // --occluders, --max-move.
+  // --measure-held, --refine, --occluders, --max-move.
   void Add(CLI::App* command);
   // Throws when the options disagree, with each other or with `policy` (the --policy file:
   // needed by --actor policy, refused by --actor twin; --q goes with --look q); `command` names

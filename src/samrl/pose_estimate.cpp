@@ -176,6 +176,14 @@ ObjectPoseEstimator::~ObjectPoseEstimator() = default;
 
 const core::Pose& ObjectPoseEstimator::nominal(int i) const { return models_.at(i)->nominal; }
 
+core::Pose ObjectPoseEstimator::Settled(int i, const core::Pose& pose,
+                                        const std::vector<Eigen::Vector3d>& points,
+                                        double bound) const {
+  if (points.empty()) return pose;
+  return Settle(*models_.at(i)->surface, points, pose,
+                options_.settle > 0 ? options_.settle : 0.003, bound);
+}
+
 int ObjectPoseEstimator::symmetry(int i) const { return models_.at(i)->symmetry; }
 
 core::Pose ObjectPoseEstimator::NearestLookAlike(int i, const core::Pose& pose) const {
@@ -209,7 +217,8 @@ std::string Magnitude(const core::Pose& p) {
 
 std::vector<Eigen::Vector3d> ObjectPoseEstimator::Foreground(
     const std::vector<Eigen::Vector3d>& frame_points, const sim::ArmVector& q, double gripper_width,
-    core::Pose* correction, int held, const core::Pose& held_pose) {
+    core::Pose* correction, int held, const core::Pose& held_pose,
+    std::vector<Eigen::Vector3d>* held_points, double held_reach) {
   env_.PoseRobot(q, 0.5 * gripper_width, 0);
   const mjModel* m = env_.model();
   if (held >= int(models_.size()))
@@ -223,6 +232,19 @@ std::vector<Eigen::Vector3d> ObjectPoseEstimator::Foreground(
            (!std::binary_search(object_geoms_.begin(), object_geoms_.end(), g) ||
             (held >= 0 && sim::InSubtree(m, m->geom_bodyid[g], models_[held]->id)));
   });
+  // The held object alone, and the rest without it, where `held_points` are asked for.
+  real2sim::Mesh held_mesh, rest;
+  if (held >= 0 && held_points) {
+    const auto in_held = [&](int g) {
+      return sim::InSubtree(m, m->geom_bodyid[g], models_[held]->id);
+    };
+    held_mesh = real2sim::PosedGeoms(m, env_.data(), env_.base(),
+                                     [&](int g) { return Visible(m, g) && in_held(g); });
+    rest = real2sim::PosedGeoms(m, env_.data(), env_.base(), [&](int g) {
+      return Visible(m, g) && !in_held(g) &&
+             !std::binary_search(object_geoms_.begin(), object_geoms_.end(), g);
+    });
+  }
   if (held >= 0) env_.PlaceBody(models_[held]->id, models_[held]->nominal);
   core::Pose moved = core::Pose::Identity();
   if (options_.register_reach > 0) {
@@ -296,6 +318,20 @@ std::vector<Eigen::Vector3d> ObjectPoseEstimator::Foreground(
     }
   }
   if (correction) *correction = moved;
+  if (held_points) {
+    held_points->clear();
+    if (!held_mesh.empty()) {
+      // Near the held object's drawing, and farther than `background` from the rest: not the
+      // fingers around it.
+      const std::vector<double> to_held = real2sim::SurfaceDistances(points, held_mesh);
+      std::vector<Eigen::Vector3d> near_held;
+      for (std::size_t i = 0; i < points.size(); ++i)
+        if (to_held[i] <= held_reach) near_held.push_back(points[i]);
+      const std::vector<double> to_rest = real2sim::SurfaceDistances(near_held, rest);
+      for (std::size_t i = 0; i < near_held.size(); ++i)
+        if (to_rest[i] > options_.background) held_points->push_back(near_held[i]);
+    }
+  }
   const auto& w = twin_->spec().workspace;
   const Eigen::Vector3d lo(w.min[0], w.min[1], w.min[2]), hi(w.max[0], w.max[1], w.max[2]);
   std::vector<Eigen::Vector3d> out;

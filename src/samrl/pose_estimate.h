@@ -125,16 +125,27 @@ class ObjectPoseEstimator {
   // workspace, the arm at `q` with the fingers `gripper_width` apart (the arm is in the frame
   // too); the frame registered to that geometry first, if the options say so (`correction`: the
   // rigid motion applied to the points). `held`: one of the bodies (an index into them) that the
-  // gripper holds, at `held_pose`: its points count as the arm's (-1: none).
+  // gripper holds, at `held_pose`: its points count as the arm's (-1: none). `held_points`, if
+  // given, gets the registered frame's points within `held_reach` of the held object that the
+  // rest of the fixed geometry and the arm does not explain: the held object as the frame shows
+  // it, wherever it sits in the hand.
   std::vector<Eigen::Vector3d> Foreground(const std::vector<Eigen::Vector3d>& points,
                                           const sim::ArmVector& q, double gripper_width,
                                           core::Pose* correction = nullptr, int held = -1,
-                                          const core::Pose& held_pose = core::Pose::Identity());
+                                          const core::Pose& held_pose = core::Pose::Identity(),
+                                          std::vector<Eigen::Vector3d>* held_points = nullptr,
+                                          double held_reach = 0.01);
 
   // Every body's pose from foreground points, in the order the bodies were given; a body whose
   // `skip` entry is true is not fitted (reported unseen, at the twin's own pose).
   std::vector<ObjectPose> Estimate(const std::vector<Eigen::Vector3d>& foreground,
                                    const std::vector<bool>& skip = {}) const;
+
+  // Body i at `pose` shifted in the table's plane, by at most `bound` (m) along each axis, to
+  // where the squared distances of `points` to its surface, each capped at options.settle (3 mm
+  // if 0), are least (the settle of every fit; also for an object in the hand).
+  core::Pose Settled(int i, const core::Pose& pose, const std::vector<Eigen::Vector3d>& points,
+                     double bound) const;
 
   // The twin's own pose of body i.
   const core::Pose& nominal(int i) const;

@@ -15,6 +15,7 @@
 
 #include <functional>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include "core/rng.h"
@@ -93,6 +94,21 @@ struct RelookOptions {
   // Tell each look what the trial's earlier frames showed that no object explains (LookContext::
   // occluders): an active look then chooses its view around it. Off, a look knows only the twin.
   bool occluders = true;
+  // At a look after a step marked `look` while holding an object, find it in the hand in the
+  // same frames as the rest: its drawing shifted in the table's plane to where its points are
+  // nearest, and carried so from then on. The hand closes on an object where the first look put
+  // it; that frame's error (a few mm, shared by every object in it) stays with the held one while
+  // a later look puts the others right, and the peg came down beside the hole. A shift of
+  // `moved` or more has the step done again. Not at the look when blocked (the held object
+  // stands on another there, and their points mix). Off by default: `eval` turns it on where the
+  // look chooses its view around the arm.
+  bool measure_held = false;
+  // At the same looks, an object seen (and fitted in a way to trust) is believed where the look
+  // put it even when it moved less than `moved` (not moved: the step is not done again), so that
+  // the held object and the others are believed as one frame shows them; with measure_held, only
+  // when the held object was found in the hand. Off by default (a fixed
+  // camera's later looks have the arm over the objects); `eval` turns it on with measure_held.
+  bool refine = false;
   template <class A>
   void Serialize(A& a) {
     a("max_looks", max_looks);
@@ -103,6 +119,8 @@ struct RelookOptions {
     a("moved_when_blocked", moved_when_blocked);
     a("look_when_unseen", look_when_unseen);
     a("occluders", occluders);
+    a("measure_held", measure_held);
+    a("refine", refine);
     a.Require(max_looks >= 1, "max_looks", "at least the first look");
     a.Require(moved > 0 && max_move > moved, "moved", "0 < moved < max_move, in m");
     a.Require(moved_when_blocked > 0 && max_move > moved_when_blocked, "moved_when_blocked",
@@ -165,14 +183,25 @@ class TwinActor : public reality::Operator {
   // What the actor believes and holds, for the look callback.
   LookContext Context(const reality::Observation& o) const;
   // Looks at the scene; re-estimates every object but the carried one; after the first look, one
-  // found less than `moved_bound` (m) from where it was believed stays there. Returns the largest
-  // distance (table plane) an object seen was found from where it was believed.
-  double LookAndEstimate(const reality::Observation& o, double moved_bound);
+  // found less than `moved_bound` (m) from where it was believed stays there unless the relook
+  // options refine (not when `blocked`: the look when the carried site is blocked on the way
+  // down), and the held object is measured in the hand if they say so (not when blocked either).
+  // Returns the largest distance (table plane) an object seen was found from where it was
+  // believed, of those `moved_bound` or more, and the held object's shift.
+  double LookAndEstimate(const reality::Observation& o, double moved_bound, bool blocked = false);
   // Whether `point` (base frame) is within `margin` of an object where the actor believes it (and
   // the fit it believes is one to trust).
   bool NearAnObject(const Eigen::Vector3d& point, double margin) const;
   // Looks at the held object and moves its carried sites to where its points end.
   void MeasureReach(const reality::Observation& o);
+  // Of `seen` (base frame), the points on the held object: within `margin` of it where the actor
+  // believes it, and nearer it than any other object.
+  std::vector<Eigen::Vector3d> PointsOnHeld(const std::vector<Eigen::Vector3d>& seen,
+                                            double margin) const;
+  // Moves the held object (in the hand, for good) to where `seen`, the frames' points near it,
+  // show it; returns how far (m, table plane), or nothing if too few points or the shift is not
+  // the object's (it then stays as it was).
+  std::optional<double> MeasureHeld(const std::vector<Eigen::Vector3d>& seen);
   bool reach_measured_ = false;  // this trial
   // This trial's points that no object explained when they were seen (base frame): clutter, or
   // fixed geometry the twin has elsewhere. Those that the current beliefs still leave unexplained
