@@ -322,11 +322,15 @@ std::vector<Eigen::Vector3d> ObjectPoseEstimator::Foreground(
     held_points->clear();
     if (!held_mesh.empty()) {
       // Near the held object's drawing, and farther than `background` from the rest: not the
-      // fingers around it.
-      const std::vector<double> to_held = real2sim::SurfaceDistances(points, held_mesh);
-      std::vector<Eigen::Vector3d> near_held;
+      // fingers around it. The background has the held object, so only the points `d` already
+      // has within reach (and a float's rounding) can be; the rest of the frame is not queried.
+      std::vector<Eigen::Vector3d> candidates;
       for (std::size_t i = 0; i < points.size(); ++i)
-        if (to_held[i] <= held_reach) near_held.push_back(points[i]);
+        if (d[i] <= held_reach + 1e-6) candidates.push_back(points[i]);
+      const std::vector<double> to_held = real2sim::SurfaceDistances(candidates, held_mesh);
+      std::vector<Eigen::Vector3d> near_held;
+      for (std::size_t i = 0; i < candidates.size(); ++i)
+        if (to_held[i] <= held_reach) near_held.push_back(candidates[i]);
       const std::vector<double> to_rest = real2sim::SurfaceDistances(near_held, rest);
       for (std::size_t i = 0; i < near_held.size(); ++i)
         if (to_rest[i] > options_.background) held_points->push_back(near_held[i]);

@@ -106,8 +106,8 @@ struct RelookOptions {
   // At the same looks, an object seen (and fitted in a way to trust) is believed where the look
   // put it even when it moved less than `moved` (not moved: the step is not done again), so that
   // the held object and the others are believed as one frame shows them; with measure_held, only
-  // when the held object was found in the hand. Off by default (a fixed
-  // camera's later looks have the arm over the objects); `eval` turns it on with measure_held.
+  // when the held object was found in the hand. Off by default (a fixed camera's later looks have
+  // the arm over the objects); `eval` turns it on with measure_held.
   bool refine = false;
   template <class A>
   void Serialize(A& a) {
