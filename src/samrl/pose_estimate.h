@@ -47,8 +47,9 @@ struct PoseEstimateOptions {
   // out under 100 left those frames 1-2 mm off.
   double register_min_hold = 30;
   double cell = 0.03;  // m: ICP starts at the centroids of foreground points per cell
-  // m: starts only this far (in the table's plane) from the object's pose in the twin. Clutter
-  // farther away adds no starts: with four boxes on the table and no bound a trial took 6 min.
+  // m: starts, and the fits taken, only this far (in the table's plane) from the object's pose in
+  // the twin. Clutter farther away adds no starts (with four boxes on the table and no bound a
+  // trial took 6 min), and a fit that slides out to it is not taken.
   double search = 0.15;
   int min_cell_points = 5;  // of a start cell
   int yaw_starts = 8;       // over a whole turn
