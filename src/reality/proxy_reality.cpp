@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <set>
+#include <string>
 
 #include "core/config.h"
 #include "core/error.h"
@@ -246,11 +248,26 @@ nlohmann::json ProxyReality::GraderState() const {
     objects[spec.objects[k]] = xyz(to_base * Eigen::Vector3d(d->xpos + 3 * index.object_bodies[k]));
     object_quats[spec.objects[k]] = {in_base.w(), in_base.x(), in_base.y(), in_base.z()};
   }
+  // What the arm touches (besides itself): a body named by the world's MJCF, geom if named.
+  auto name = [m](int geom) {
+    const char* g = mj_id2name(m, mjOBJ_GEOM, geom);
+    const char* b = mj_id2name(m, mjOBJ_BODY, m->geom_bodyid[geom]);
+    std::string out = b ? b : "body " + std::to_string(m->geom_bodyid[geom]);
+    return g && (!b || std::string(g) != b) ? out + "/" + g : out;
+  };
+  std::set<std::string> touches;
+  for (int i = 0; i < d->ncon; ++i) {
+    const int g1 = d->contact[i].geom1, g2 = d->contact[i].geom2;
+    const bool r1 = m->geom_group[g1] == sim::kRobotGeomGroup,
+               r2 = m->geom_group[g2] == sim::kRobotGeomGroup;
+    if (r1 != r2) touches.insert(name(r1 ? g1 : g2) + " - " + name(r1 ? g2 : g1));
+  }
   return {{"joints", joints},
           {"objects", objects},
           {"object_quats", object_quats},
           {"gripper", env_->FingerOpening()},
           {"tool", xyz(env_->EePose().translation)},
+          {"arm_contacts", touches},
           {"success_closeness", env_->SuccessCloseness()}};
 }
 

@@ -164,7 +164,8 @@ class ProxyReality : public Robot {
   // For graders and tests only: the hidden simulation.
   const sim::Env& hidden_env() const { return *env_; }
   // For graders only: the hidden scene now, by name: each task joint's value, each task object's
-  // position, the gripper's opening and the tool's position (robot base frame, m or rad).
+  // position, the gripper's opening and the tool's position (robot base frame, m or rad), and
+  // what the arm touches ("arm_contacts": "arm body - other body/geom", robot geom group 1).
   nlohmann::json GraderState() const;
   // For graders and tests only: how far the last Capture's camera was from where it was asked to
   // be, in the camera's frame (the true camera is the requested pose times this).

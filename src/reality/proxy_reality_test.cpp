@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <string>
+#include <vector>
 
 #include "sim/expert.h"
 
@@ -150,6 +152,28 @@ TEST_P(World, HigherLevelsAddClutterAndPushes) {
   };
   EXPECT_FALSE(pushed_at(2)) << GetParam();
   EXPECT_TRUE(pushed_at(3)) << GetParam();
+}
+
+// For diagnosing a trial: the grader's state says what the arm touches. At rest, nothing; once the
+// world's operator has closed the fingers on the peg, the fingers touch the peg.
+TEST(GraderState, SaysWhatTheArmTouches) {
+  ProxyReality proxy(ResolveWorldDir("peg_insertion"));
+  Observation o = proxy.Reset({100, 1});
+  const auto touches = [&] {
+    return proxy.GraderState().at("arm_contacts").get<std::vector<std::string>>();
+  };
+  EXPECT_TRUE(touches().empty()) << "at rest";
+  ActionClient client(proxy, proxy.hidden_env().task().spec().control.limits);
+  bool holds = false;
+  for (int t = 0; t < 40 && !holds; ++t) {
+    const OperatorInput in = proxy.AskOperator();
+    ASSERT_EQ(in.kind, OperatorInput::Kind::kAction);
+    client.Act(in.action, o);
+    o = proxy.Observe(false);
+    for (const std::string& c : touches())
+      holds |= c.find("finger") != std::string::npos && c.find("peg") != std::string::npos;
+  }
+  EXPECT_TRUE(holds);
 }
 
 INSTANTIATE_TEST_SUITE_P(Worlds, World, ::testing::ValuesIn(kWorlds));
