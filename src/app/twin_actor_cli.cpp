@@ -90,6 +90,10 @@ void TwinActorCli::Add(CLI::App* c) {
               "twin actor: tell each look what the trial's earlier frames showed that no object "
               "explains (clutter, a panel the twin has elsewhere), so an active look chooses "
               "around it (default on)");
+  c->add_option("--min-points", relook.min_points,
+                "twin actor: explained points (in a 640x480 frame) a fit needs for the actor to "
+                "act on it; fewer (a sliver beside the arm) leave the object where it was believed")
+      ->check(CLI::PositiveNumber);
   c->add_option("--max-move", relook.max_move,
                 "twin actor: m beyond which an object found is taken for a misfit (clutter taken "
                 "for it), not a push, and ignored")
@@ -175,6 +179,7 @@ TwinActorOnRobot::TwinActorOnRobot(reality::Robot& robot, const sim::TaskSpec& t
   header_["occluders"] = relook.occluders;
   header_["measure_held"] = relook.measure_held;
   header_["refine"] = relook.refine;
+  header_["min_points"] = relook.min_points;
   header_["capture"] = {capture.width, capture.height};
 }
 

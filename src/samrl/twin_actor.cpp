@@ -79,11 +79,6 @@ constexpr double kOccluderMargin = 0.02;
 constexpr double kOccluderCell = 0.02;
 constexpr int kOccluderMinPoints = 20;
 
-// A fit the actor acts on: seen, and with more of the frame for it than against it. A block behind
-// a screen is fitted to the screen (on the proxy: 281 points explained, 1460 inside its outline
-// not); that is not a sight of it.
-bool Trusted(const ObjectPose& e) { return e.seen && e.score > 0; }
-
 }  // namespace
 
 std::vector<Occluder> OccluderColumns(const std::vector<Eigen::Vector3d>& points, double cell,
@@ -176,6 +171,12 @@ void TwinActor::Begin(uint64_t seed) {
   unexplained_.clear();
 }
 
+// A block behind a screen is fitted to the screen (on the proxy: 281 points explained, 1460 inside
+// its outline not); that is not a sight of it.
+bool TwinActor::Trusted(const ObjectPose& e) const {
+  return e.seen && e.inliers >= trust_points_ && e.score > 0;
+}
+
 bool TwinActor::NearAnObject(const Eigen::Vector3d& point, double margin) const {
   const Eigen::Vector3d world = env_.base() * point;
   for (std::size_t i = 0; i < bodies_.size(); ++i) {
@@ -215,7 +216,9 @@ double TwinActor::LookAndEstimate(const reality::Observation& o, double moved_bo
   const bool measure_held = carried_ >= 0 && relook_.measure_held && !blocked;
   bool refine = relook_.refine && !blocked;
   std::vector<Eigen::Vector3d> points, held_points, h;
+  double pixels = 0;
   for (const reality::RgbdFrame& frame : look_(context)) {
+    pixels += double(frame.intrinsics.width) * frame.intrinsics.height;
     const auto p =
         estimator_.Foreground(FramePoints(frame, camera_correction_), o.q, o.gripper_width, nullptr,
                               carried_, held, measure_held ? &h : nullptr, kHeldMargin);
@@ -225,6 +228,8 @@ double TwinActor::LookAndEstimate(const reality::Observation& o, double moved_bo
   std::vector<bool> skip(bodies_.size(), false);
   if (carried_ >= 0) skip[carried_] = true;
   const std::vector<ObjectPose> found = estimator_.Estimate(points, skip);
+  // RelookOptions::min_points is for a 640x480 frame: the points on an object go as the pixels.
+  trust_points_ = std::max(1.0, std::ceil(relook_.min_points * pixels / (640.0 * 480.0)));
   ++looks_;
   const bool first = estimates_.empty();
   if (first) estimates_ = found;
@@ -248,6 +253,12 @@ double TwinActor::LookAndEstimate(const reality::Observation& o, double moved_bo
     // has it, or where it was misfitted: wherever it is found now, it was there all along.
     const bool first_sight = !first && Trusted(found[i]) && !Trusted(estimates_[i]);
     const bool again = !first && !first_sight;
+    if (again && found[i].seen && !Trusted(found[i]))
+      spdlog::debug(
+          "twin actor, look {}: {} fitted at ({:.3f}, {:.3f}) to {} points, {} against; "
+          "not taken",
+          looks_, found[i].body, found[i].pose.translation.x(), found[i].pose.translation.y(),
+          found[i].inliers, found[i].outliers);
     if (again && (!Trusted(found[i]) || (d < moved_bound && !refine))) continue;
     if (again && d > relook_.max_move) {
       spdlog::info("twin actor: look {} fitted {} {:.0f} mm away, too far for a push; ignored",
@@ -383,7 +394,7 @@ reality::OperatorInput TwinActor::Next(const reality::Observation& o) {
   if (looks_ == 0) {
     LookAndEstimate(o, relook_.moved);
     const bool unsure = std::any_of(estimates_.begin(), estimates_.end(),
-                                    [](const ObjectPose& e) { return !Trusted(e); });
+                                    [this](const ObjectPose& e) { return !Trusted(e); });
     if (relook_.look_when_unseen && unsure && looks_ < relook_.max_looks) {
       for (const ObjectPose& e : estimates_)
         if (!Trusted(e))
