@@ -472,7 +472,8 @@ TEST(TwinActorOnReality, LooksAgainWhenBlockedAndFindsTheBlockShovedAfterTheLast
     scene.Run(actor, seed, 3, scene.spec.horizon, true);
     const bool success = scene.proxy.QuerySuccess() == reality::SuccessAnswer::kSuccess;
     if (when_blocked) {
-      EXPECT_EQ(actor.looks(), 3);
+      // The first, over the hole, when blocked, and over the hole again (the step done again).
+      EXPECT_EQ(actor.looks(), 4);
       EXPECT_EQ(actor.redone_steps(), 1);
       EXPECT_TRUE(success) << "looking when blocked";
       EXPECT_LT(SiteError(*scene.task, actor.estimates(), scene.proxy.hidden_env(), "hole_top"),
@@ -505,7 +506,8 @@ TEST(TwinActorOnReality, BlockedItTakesASmallerShiftForAMove) {
     const bool success = scene.proxy.QuerySuccess() == reality::SuccessAnswer::kSuccess;
     const double error =
         SiteError(*scene.task, actor.estimates(), scene.proxy.hidden_env(), "hole_top");
-    EXPECT_EQ(actor.looks(), 3) << "the first, over the hole, and when blocked";
+    // The first, over the hole, when blocked, and, the step done again, over the hole again.
+    EXPECT_EQ(actor.looks(), when_blocked < 0.003 ? 4 : 3);
     if (when_blocked < 0.003) {
       EXPECT_EQ(actor.redone_steps(), 1);
       EXPECT_TRUE(success) << "moved when blocked " << when_blocked;
@@ -655,7 +657,8 @@ TEST(TwinActorOnReality, FindsThePegInTheHandInTheFramesThatFindTheHole) {
 // sliver of 56 points, none against, 20 mm from where it stands. Taken for a push, the peg was
 // carried there (stop 80). A fit needs RelookOptions::min_points (120) to be acted on: the block
 // stays believed where it is, to a few mm. (The peg does not go in either way: pressed on the
-// block's top, the search by feel does not bring its tip over the hole.)
+// block's top, the search by feel does not bring its tip over the hole.) Three looks, as then: with
+// a fourth (the default since stop 81), the look after the step done again puts the block right.
 TEST(TwinActorOnReality, DoesNotFollowABlockFittedToASliver) {
   learn::PinMathThreads(1);
   Scene scene("peg_insertion_hidden");
@@ -666,6 +669,7 @@ TEST(TwinActorOnReality, DoesNotFollowABlockFittedToASliver) {
     RelookOptions relook;
     relook.measure_held = relook.refine = true;
     relook.min_points = min_points;
+    relook.max_looks = 3;
     TwinActor actor(scene.task, scene.proxy, active, true, {}, {}, relook);
     scene.Run(actor, seed, 3, scene.spec.horizon, true);
     EXPECT_EQ(actor.looks(), 3) << "min points " << min_points;
