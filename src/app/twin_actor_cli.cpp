@@ -94,6 +94,10 @@ void TwinActorCli::Add(CLI::App* c) {
                 "twin actor: explained points (in a 640x480 frame) a fit needs for the actor to "
                 "act on it; fewer (a sliver beside the arm) leave the object where it was believed")
       ->check(CLI::PositiveNumber);
+  c->add_flag("--hand-clearance,!--no-hand-clearance", relook.hand_clearance,
+              "twin actor: of the finger directions the expert may take alike, take the nearest "
+              "whose hand keeps clear of what the frames showed that no object explains (a "
+              "screen beside the hole; default on)");
   c->add_option("--max-move", relook.max_move,
                 "twin actor: m beyond which an object found is taken for a misfit (clutter taken "
                 "for it), not a push, and ignored")
@@ -180,6 +184,7 @@ TwinActorOnRobot::TwinActorOnRobot(reality::Robot& robot, const sim::TaskSpec& t
   header_["measure_held"] = relook.measure_held;
   header_["refine"] = relook.refine;
   header_["min_points"] = relook.min_points;
+  header_["hand_clearance"] = relook.hand_clearance;
   header_["capture"] = {capture.width, capture.height};
 }
 

@@ -15,38 +15,39 @@
 namespace twinforge::samrl {
 namespace {
 
-// How far `point` (world) is from the nearest of a body's geoms: 0 inside one. Boxes, spheres,
-// cylinders and capsules exactly; other shapes (meshes, ellipsoids) by their bounding sphere.
+// How far `point` is from geom `g` turned `rotation` about `position` (all in one frame): 0 inside
+// it. Boxes, spheres, cylinders and capsules exactly; other shapes (meshes, ellipsoids) by their
+// bounding sphere.
+double DistanceToGeom(const mjModel* m, int g, const Eigen::Matrix3d& rotation,
+                      const Eigen::Vector3d& position, const Eigen::Vector3d& point) {
+  const Eigen::Vector3d q = rotation.transpose() * (point - position);
+  const double* size = m->geom_size + 3 * g;
+  switch (m->geom_type[g]) {
+    case mjGEOM_BOX:
+      return (q.cwiseAbs() - Eigen::Map<const Eigen::Vector3d>(size)).cwiseMax(0.0).norm();
+    case mjGEOM_SPHERE:
+      return std::max(q.norm() - size[0], 0.0);
+    case mjGEOM_CYLINDER:
+      return std::hypot(std::max(q.head<2>().norm() - size[0], 0.0),
+                        std::max(std::abs(q.z()) - size[1], 0.0));
+    case mjGEOM_CAPSULE:
+      return std::max(
+          (q - Eigen::Vector3d(0, 0, std::clamp(q.z(), -size[1], size[1]))).norm() - size[0], 0.0);
+    default:
+      return std::max(q.norm() - m->geom_rbound[g], 0.0);
+  }
+}
+
+// How far `point` (world) is from the nearest of a body's geoms: 0 inside one.
 double DistanceToBody(const mjModel* m, const mjData* d, int body, const Eigen::Vector3d& point) {
   double nearest = std::numeric_limits<double>::infinity();
   for (int g = 0; g < m->ngeom; ++g) {
     if (m->geom_bodyid[g] != body) continue;
     const Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> rotation(d->geom_xmat +
                                                                                   9 * g);
-    const Eigen::Vector3d q =
-        rotation.transpose() * (point - Eigen::Map<const Eigen::Vector3d>(d->geom_xpos + 3 * g));
-    const double* size = m->geom_size + 3 * g;
-    double distance = 0;
-    switch (m->geom_type[g]) {
-      case mjGEOM_BOX:
-        distance = (q.cwiseAbs() - Eigen::Map<const Eigen::Vector3d>(size)).cwiseMax(0.0).norm();
-        break;
-      case mjGEOM_SPHERE:
-        distance = std::max(q.norm() - size[0], 0.0);
-        break;
-      case mjGEOM_CYLINDER:
-        distance = std::hypot(std::max(q.head<2>().norm() - size[0], 0.0),
-                              std::max(std::abs(q.z()) - size[1], 0.0));
-        break;
-      case mjGEOM_CAPSULE:
-        distance = std::max(
-            (q - Eigen::Vector3d(0, 0, std::clamp(q.z(), -size[1], size[1]))).norm() - size[0],
-            0.0);
-        break;
-      default:
-        distance = std::max(q.norm() - m->geom_rbound[g], 0.0);
-    }
-    nearest = std::min(nearest, distance);
+    nearest = std::min(
+        nearest, DistanceToGeom(m, g, rotation,
+                                Eigen::Map<const Eigen::Vector3d>(d->geom_xpos + 3 * g), point));
   }
   return nearest;
 }
@@ -78,6 +79,14 @@ constexpr int kHeldMinPoints = 50;
 constexpr double kOccluderMargin = 0.02;
 constexpr double kOccluderCell = 0.02;
 constexpr int kOccluderMinPoints = 20;
+
+// RelookOptions::hand_clearance: the hand at a target is in the way of what the frames showed when
+// this many of the trial's points no object explains are within kHandMargin of it. Points within
+// kHandStray of the hand where it was when they were seen are left out: the arm's own edges, a few
+// mm off its drawing, are where the hand goes back to after a look from over the hole.
+constexpr double kHandMargin = 0.01, kHandStray = 0.03;
+constexpr int kHandMinPoints = kOccluderMinPoints;
+constexpr double kHandReach = 0.3;  // m from the tool: farther points are not near the hand
 
 }  // namespace
 
@@ -137,6 +146,46 @@ TwinActor::TwinActor(std::shared_ptr<const sim::Task> twin, reality::Robot& robo
       relook_(relook) {
   for (const auto& name : twin->spec().objects)
     bodies_.push_back(mj_name2id(env_.model(), mjOBJ_BODY, name.c_str()));
+  // The hand: the robot's geoms on the tool's body and the bodies below it (the fingers).
+  const mjModel* m = env_.model();
+  env_.Reset(0, 0);
+  const core::Pose tool = env_.base() * env_.EePose();
+  const int hand = m->site_bodyid[twin->index().robot.ee_site];
+  for (int g = 0; g < m->ngeom; ++g) {
+    int b = m->geom_bodyid[g];
+    while (b != hand && b != 0) b = m->body_parentid[b];
+    if (b != hand || m->geom_group[g] != sim::kRobotGeomGroup) continue;
+    const Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> rotation(
+        env_.data()->geom_xmat + 9 * g);
+    const core::Pose world{Eigen::Map<const Eigen::Vector3d>(env_.data()->geom_xpos + 3 * g),
+                           core::Quat(Eigen::Matrix3d(rotation))};
+    hand_.emplace_back(g, tool.Inverse() * world);
+  }
+  if (relook_.hand_clearance)
+    expert_.set_clearance([this](const core::Pose& at) { return HandClear(at); });
+}
+
+double TwinActor::DistanceToHand(const core::Pose& tool, const Eigen::Vector3d& point) const {
+  double nearest = std::numeric_limits<double>::infinity();
+  for (const auto& [g, in_tool] : hand_) {
+    const core::Pose pose = tool * in_tool;
+    nearest = std::min(nearest, DistanceToGeom(env_.model(), g, pose.rotation.toRotationMatrix(),
+                                               pose.translation, point));
+  }
+  return nearest;
+}
+
+bool TwinActor::HandClear(const core::Pose& tool) const {
+  int in_the_way = 0;
+  for (std::size_t j = 0; j < unexplained_.size(); ++j) {
+    const Eigen::Vector3d& p = unexplained_[j];
+    if ((p - tool.translation).norm() > kHandReach) continue;
+    if (DistanceToHand(tool, p) >= kHandMargin ||
+        DistanceToHand(unexplained_tool_[j], p) < kHandStray || NearAnObject(p, kOccluderMargin))
+      continue;
+    if (++in_the_way >= kHandMinPoints) return false;
+  }
+  return true;
 }
 
 int TwinActor::feature_dim() const {
@@ -169,6 +218,7 @@ void TwinActor::Begin(uint64_t seed) {
   carried_ = -1;
   reach_measured_ = false;
   unexplained_.clear();
+  unexplained_tool_.clear();
 }
 
 // A block behind a screen is fitted to the screen (on the proxy: 281 points explained, 1460 inside
@@ -281,7 +331,10 @@ double TwinActor::LookAndEstimate(const reality::Observation& o, double moved_bo
   if (relook_.occluders) {
     const std::size_t before = unexplained_.size();
     for (const Eigen::Vector3d& p : points)
-      if (!NearAnObject(p, kOccluderMargin)) unexplained_.push_back(p);
+      if (!NearAnObject(p, kOccluderMargin)) {
+        unexplained_.push_back(p);
+        unexplained_tool_.push_back(env_.EePose());
+      }
     spdlog::debug("twin actor, look {}: {} points no object explains", looks_,
                   unexplained_.size() - before);
   }

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cstdio>
 #include <optional>
+#include <string>
 
 #include "learn/torch_runtime.h"
 #include "reality/proxy_reality.h"
@@ -659,6 +660,8 @@ TEST(TwinActorOnReality, FindsThePegInTheHandInTheFramesThatFindTheHole) {
 // stays believed where it is, to a few mm. (The peg does not go in either way: pressed on the
 // block's top, the search by feel does not bring its tip over the hole.) Three looks, as then: with
 // a fourth (the default since stop 81), the look after the step done again puts the block right.
+// And the hand turned as then: kept clear of the screen (stop 81), it comes over the hole another
+// way, and the looks see the block otherwise.
 TEST(TwinActorOnReality, DoesNotFollowABlockFittedToASliver) {
   learn::PinMathThreads(1);
   Scene scene("peg_insertion_hidden");
@@ -670,6 +673,7 @@ TEST(TwinActorOnReality, DoesNotFollowABlockFittedToASliver) {
     relook.measure_held = relook.refine = true;
     relook.min_points = min_points;
     relook.max_looks = 3;
+    relook.hand_clearance = false;
     TwinActor actor(scene.task, scene.proxy, active, true, {}, {}, relook);
     scene.Run(actor, seed, 3, scene.spec.horizon, true);
     EXPECT_EQ(actor.looks(), 3) << "min points " << min_points;
@@ -681,6 +685,44 @@ TEST(TwinActorOnReality, DoesNotFollowABlockFittedToASliver) {
     } else {
       EXPECT_EQ(actor.redone_steps(), 1) << "the sliver taken for a push";
       EXPECT_GT(error, 0.015);
+    }
+  }
+}
+
+// In eval's level-3 trial 6 on the hidden peg (seeds 5000), the shove moves the block 22 mm toward
+// the screen. The look from over the hole finds it, and the expert comes over it again, the
+// fingers (the hand's 19 cm) pointing at the screen as the nearest of the square peg's four ways:
+// the hand met the screen and stood still for 24 steps, and the peg never went in. Kept clear of
+// what the frames showed that no object explains (`hand_clearance`), the hand comes over the
+// block the other way, and the peg goes in.
+TEST(TwinActorOnReality, KeepsTheHandClearOfAScreenItSaw) {
+  learn::PinMathThreads(1);
+  Scene scene("peg_insertion_hidden");
+  real2sim::TwinGeometry geometry(scene.spec, 600);
+  const Look active = scene.EvalActiveLook(geometry);
+  const uint64_t seed = core::MixSeed(5000, 3000 + 6);
+  for (const bool clearance : {true, false}) {
+    RelookOptions relook;
+    relook.measure_held = relook.refine = true;
+    relook.hand_clearance = clearance;
+    TwinActor actor(scene.task, scene.proxy, active, true, {}, {}, relook);
+    int on_screen = 0;
+    scene.Run(actor, seed, 3, scene.spec.horizon, true,
+              [&](const reality::Observation&, const sim::Action&) {
+                const nlohmann::json state = scene.proxy.GraderState();
+                for (const auto& c : state.at("arm_contacts"))
+                  if (c.get<std::string>().find("screen") != std::string::npos) {
+                    ++on_screen;
+                    break;
+                  }
+              });
+    const bool success = scene.proxy.QuerySuccess() == reality::SuccessAnswer::kSuccess;
+    if (clearance) {
+      EXPECT_LT(on_screen, 3);
+      EXPECT_TRUE(success) << "the hand kept clear";
+    } else {
+      EXPECT_GT(on_screen, 10);
+      EXPECT_FALSE(success) << "the hand against the screen";
     }
   }
 }

@@ -250,6 +250,14 @@ core::Pose ScriptedExpert::Target(const Env& env, const ExpertStep& step) {
     last_height_ = height;
     if (spiral_ > 0) target.translation += anchor.rotation * SpiralPoint(spiral_, step.search);
   }
+  // Where the tool goes for the target's point, turned `rotation`: with a carried site, so that,
+  // holding the object as it does now, the site lands there.
+  const auto tool_at = [&](const Eigen::Vector3d& point, const core::Quat& rotation) {
+    if (ids.carry < 0) return point;
+    const Eigen::Vector3d site_in_tool =
+        ee.rotation.conjugate() * (env.SitePose(ids.carry).translation - ee.translation);
+    return Eigen::Vector3d(point - rotation * site_in_tool);
+  };
   if (step.keep_orientation) {
     if (first) kept_rotation_ = ee.rotation;
     target.rotation = kept_rotation_;
@@ -267,25 +275,23 @@ core::Pose ScriptedExpert::Target(const Env& env, const ExpertStep& step) {
       return ToolOrientation(approach, k % 2 == 0 ? turned : Eigen::Vector3d(-turned));
     };
     if (first) {
-      finger_turn_ = 0;
-      double nearest = core::AngleBetween(alike(0), ee.rotation);
-      for (int k = 1; k < step.symmetry; ++k) {
-        const double angle = core::AngleBetween(alike(k), ee.rotation);
-        if (angle < nearest) {
-          finger_turn_ = k;
-          nearest = angle;
-        }
-      }
+      // Nearest first (ties to the lower k); with a clearance, the nearest whose tool pose at the
+      // target is clear, if any is.
+      std::vector<std::pair<double, int>> order;
+      for (int k = 0; k < step.symmetry; ++k)
+        order.emplace_back(core::AngleBetween(alike(k), ee.rotation), k);
+      std::sort(order.begin(), order.end());
+      finger_turn_ = order.front().second;
+      if (clearance_)
+        for (const auto& [angle, k] : order)
+          if (clearance_({tool_at(target.translation, alike(k)), alike(k)})) {
+            finger_turn_ = k;
+            break;
+          }
     }
     target.rotation = alike(finger_turn_);
   }
-  if (ids.carry >= 0) {
-    // The target is for the carried site: place the tool so that, holding the object as it
-    // does now, the site lands there.
-    const Eigen::Vector3d site_in_tool =
-        ee.rotation.conjugate() * (env.SitePose(ids.carry).translation - ee.translation);
-    target.translation -= target.rotation * site_in_tool;
-  }
+  target.translation = tool_at(target.translation, target.rotation);
   return target;
 }
 

@@ -2,6 +2,7 @@
 // state, emitting the task's own action type (discrete moves or continuous deltas).
 #pragma once
 
+#include <functional>
 #include <memory>
 #include <vector>
 
@@ -56,6 +57,13 @@ class ScriptedExpert {
   // default): every move as scripted. Throws core::Error for negative iterations, a stretch
   // under 1 or a negative end speed weight.
   void set_planning(const PlanOptions& plan);
+  // Whether the hand is clear of what is around it at a tool pose (robot base frame).
+  using Clearance = std::function<bool(const core::Pose& tool)>;
+  // A move step whose fingers may take any of several directions that serve alike (symmetry)
+  // takes the one nearest the tool's when the step starts. With a clearance, the nearest of those
+  // whose tool pose at the step's target is clear (the nearest if none is): the hand is nearly
+  // 20 cm along its fingers, and over a block 12 cm from a screen it met the screen.
+  void set_clearance(Clearance clearance) { clearance_ = std::move(clearance); }
   // Moves planned so far, and of them those whose optimization failed (moved as scripted).
   const PlanCounts& plans() const { return plans_; }
   // Goes back to the start of step `step` (a step done again: the scene changed under it).
@@ -106,6 +114,7 @@ class ScriptedExpert {
   int spiral_ = 0;
   PlanOptions planning_;
   PlanCounts plans_;
+  Clearance clearance_;
   // The current move's tool poses: where the tool was when the move was planned, then the
   // plan's, one per control step.
   std::vector<core::Pose> plan_;
