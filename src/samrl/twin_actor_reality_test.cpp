@@ -86,6 +86,22 @@ struct Scene {
   sim::Camera camera;
 };
 
+// The hidden peg with the active look as eval makes it; eval's relook options for that look have
+// the in-hand measure and the refine on.
+struct HiddenPeg {
+  HiddenPeg() : scene("peg_insertion_hidden"), geometry(scene.spec, 600) {
+    active = scene.EvalActiveLook(geometry);
+  }
+  static RelookOptions EvalRelook() {
+    RelookOptions relook;
+    relook.measure_held = relook.refine = true;
+    return relook;
+  }
+  Scene scene;
+  real2sim::TwinGeometry geometry;
+  Look active;
+};
+
 // One 640x480 frame from where the task camera is said to be: both objects found to a few mm,
 // once the frame is registered to the arm (the movable camera's pose is a few mm and mrad off;
 // without the registration the estimates were 3-8 mm off).
@@ -619,9 +635,9 @@ TEST(TwinActorOnReality, TurnsTheWristToTheNearestOfTheFourWaysTheSquarePegFits)
 // within a millimetre, and it goes in.
 TEST(TwinActorOnReality, FindsThePegInTheHandInTheFramesThatFindTheHole) {
   learn::PinMathThreads(1);
-  Scene scene("peg_insertion_hidden");
-  real2sim::TwinGeometry geometry(scene.spec, 600);
-  const Look active = scene.EvalActiveLook(geometry);
+  HiddenPeg peg;
+  Scene& scene = peg.scene;
+  const Look& active = peg.active;
   const uint64_t seed = core::MixSeed(5000, 2000 + 2);
   for (const bool measure : {true, false}) {
     RelookOptions relook;
@@ -664,13 +680,12 @@ TEST(TwinActorOnReality, FindsThePegInTheHandInTheFramesThatFindTheHole) {
 // way, and the looks see the block otherwise.
 TEST(TwinActorOnReality, DoesNotFollowABlockFittedToASliver) {
   learn::PinMathThreads(1);
-  Scene scene("peg_insertion_hidden");
-  real2sim::TwinGeometry geometry(scene.spec, 600);
-  const Look active = scene.EvalActiveLook(geometry);
+  HiddenPeg peg;
+  Scene& scene = peg.scene;
+  const Look& active = peg.active;
   const uint64_t seed = core::MixSeed(5000, 3000 + 20);
   for (const int min_points : {RelookOptions{}.min_points, 50}) {
-    RelookOptions relook;
-    relook.measure_held = relook.refine = true;
+    RelookOptions relook = HiddenPeg::EvalRelook();
     relook.min_points = min_points;
     relook.max_looks = 3;
     relook.hand_clearance = false;
@@ -697,13 +712,12 @@ TEST(TwinActorOnReality, DoesNotFollowABlockFittedToASliver) {
 // block the other way, and the peg goes in.
 TEST(TwinActorOnReality, KeepsTheHandClearOfAScreenItSaw) {
   learn::PinMathThreads(1);
-  Scene scene("peg_insertion_hidden");
-  real2sim::TwinGeometry geometry(scene.spec, 600);
-  const Look active = scene.EvalActiveLook(geometry);
+  HiddenPeg peg;
+  Scene& scene = peg.scene;
+  const Look& active = peg.active;
   const uint64_t seed = core::MixSeed(5000, 3000 + 6);
   for (const bool clearance : {true, false}) {
-    RelookOptions relook;
-    relook.measure_held = relook.refine = true;
+    RelookOptions relook = HiddenPeg::EvalRelook();
     relook.hand_clearance = clearance;
     TwinActor actor(scene.task, scene.proxy, active, true, {}, {}, relook);
     int on_screen = 0;
@@ -764,9 +778,9 @@ TEST(ActiveLook, FindsTheHoleTheFixedViewCannotSee) {
 // centimetre. Not told, it looks from about the same view and does not find it.
 TEST(ActiveLook, LooksAroundAScreenItSawInTheWay) {
   learn::PinMathThreads(1);
-  Scene scene("peg_insertion_hidden");
-  real2sim::TwinGeometry geometry(scene.spec, 600);
-  const Look active = scene.EvalActiveLook(geometry);
+  HiddenPeg peg;
+  Scene& scene = peg.scene;
+  const Look& active = peg.active;
   const uint64_t seed = core::MixSeed(5000, 1000 + 4);
   for (const bool occluders : {true, false}) {
     RelookOptions relook;
