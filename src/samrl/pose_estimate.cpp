@@ -187,13 +187,18 @@ core::Pose ObjectPoseEstimator::Settled(int i, const core::Pose& pose,
 int ObjectPoseEstimator::symmetry(int i) const { return models_.at(i)->symmetry; }
 
 core::Pose ObjectPoseEstimator::NearestLookAlike(int i, const core::Pose& pose) const {
+  return NearestLookAlike(i, pose, models_.at(i)->nominal);
+}
+
+core::Pose ObjectPoseEstimator::NearestLookAlike(int i, const core::Pose& pose,
+                                                 const core::Pose& reference) const {
   const Model& model = *models_.at(i);
   core::Pose best = pose;
-  double nearest = core::AngleBetween(pose.rotation, model.nominal.rotation);
+  double nearest = core::AngleBetween(pose.rotation, reference.rotation);
   for (int k = 1; k < model.symmetry; ++k) {
     core::Pose turned = pose;
     turned.rotation = pose.rotation * core::Yaw(2 * M_PI * k / model.symmetry);
-    const double angle = core::AngleBetween(turned.rotation, model.nominal.rotation);
+    const double angle = core::AngleBetween(turned.rotation, reference.rotation);
     if (angle < nearest) {
       nearest = angle;
       best = turned;

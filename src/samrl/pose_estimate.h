@@ -154,9 +154,11 @@ class ObjectPoseEstimator {
   // 1): its vertices turned by a quarter (or a half) turn all lie on its surface, within 1 mm.
   int symmetry(int i) const;
   // Of the poses of body i that look alike (`pose` turned by its symmetry), the one whose
-  // rotation is nearest the twin's own. A fit cannot tell them apart; a learned actor, trained
-  // on poses near the twin's own, needs the one it has seen.
+  // rotation is nearest `reference`'s, by default the twin's own. A fit cannot tell them apart;
+  // a learned actor, trained on poses near the twin's own, needs the one it has seen, and an
+  // object seen again is the one believed before, not a quarter turn of it.
   core::Pose NearestLookAlike(int i, const core::Pose& pose) const;
+  core::Pose NearestLookAlike(int i, const core::Pose& pose, const core::Pose& reference) const;
 
  private:
   struct Model;

@@ -9,7 +9,8 @@ namespace twinforge::samrl {
 namespace {
 
 // The square peg and the block with its square hole look the same every quarter turn; the
-// spatula only once a turn. Of a fit's look-alike poses, the one nearest the twin's own is taken.
+// spatula only once a turn. Of a fit's look-alike poses, the one nearest the twin's own is taken,
+// or the one nearest where the object was believed.
 TEST(PoseEstimate, LookAlikeTurnsOfSquareObjects) {
   auto peg = std::make_shared<const sim::Task>(sim::LoadTaskSpec("peg_insertion"));
   const ObjectPoseEstimator estimator(peg, {"peg", "hole_block"});
@@ -25,6 +26,12 @@ TEST(PoseEstimate, LookAlikeTurnsOfSquareObjects) {
       EXPECT_NEAR(core::AngleBetween(chosen.rotation, estimator.nominal(i).rotation), 0.2, 1e-6)
           << "body " << i << ", " << turn << " half turns";
       EXPECT_TRUE(chosen.translation.isApprox(fitted.translation));
+      // Seen again, nearest where it was believed: here a quarter turn from the twin's own.
+      core::Pose believed = estimator.nominal(i);
+      believed.rotation = core::Yaw(M_PI / 2 + 0.1) * believed.rotation;
+      const core::Pose again = estimator.NearestLookAlike(i, fitted, believed);
+      EXPECT_NEAR(core::AngleBetween(again.rotation, believed.rotation), 0.1, 1e-6)
+          << "body " << i << ", " << turn << " half turns";
     }
 
   auto spatula = std::make_shared<const sim::Task>(sim::LoadTaskSpec("spatula_flipping"));

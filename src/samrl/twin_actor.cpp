@@ -316,12 +316,19 @@ double TwinActor::LookAndEstimate(const reality::Observation& o, double moved_bo
       continue;
     }
     if (!again || d >= moved_bound) moved = std::max(moved, d);
+    const core::Pose believed = estimates_[i].pose;
     estimates_[i] = found[i];
     // A fit not to be trusted (at the first look) is believed where the twin has the object: a
     // block fitted to a screen would have the next look search for it inside the screen.
     if (!Trusted(found[i])) estimates_[i].pose = estimator_.nominal(int(i));
-    // A learned actor saw objects turned about as the twin has them, not a quarter turn away.
-    if (policy_) estimates_[i].pose = estimator_.NearestLookAlike(int(i), estimates_[i].pose);
+    // Seen again, a square block is the one believed, not a quarter turn of it: the expert's
+    // step under way is aligned to its frame, and on the hidden peg a refit a quarter turn round
+    // turned the hand on its way down to the hole. A learned actor saw objects turned about as
+    // the twin has them.
+    if (!first)
+      estimates_[i].pose = estimator_.NearestLookAlike(int(i), estimates_[i].pose, believed);
+    else if (policy_)
+      estimates_[i].pose = estimator_.NearestLookAlike(int(i), estimates_[i].pose);
     env_.PlaceBody(bodies_[i], estimates_[i].pose);
     spdlog::debug(
         "twin actor, look {}: {} {} at ({:.3f}, {:.3f}), {} points explained, {} not, score {:.0f}",
