@@ -120,10 +120,12 @@ struct RelookOptions {
   // PoseEstimateOptions::min_points (50) says only what it reports seen.
   int min_points = 120;
   // Of the finger directions a step's expert may take alike (a square peg's four), take the
-  // nearest whose hand at the step's target keeps a centimetre clear of what the trial's frames
-  // showed that no object explains (with `occluders`). The hand is nearly 20 cm along its fingers:
-  // over a block 12 cm from a screen, shoved toward it, it met the screen and stood still (hidden
-  // peg, level 3: 3 of the 7 failures of seeds 5000 and 7000 at stop 81).
+  // nearest whose hand keeps a centimetre clear of what the trial's frames showed that no object
+  // explains (with `occluders`), at the targets of the steps that continue one another (over the
+  // hole, down, search: ScriptedExpert::set_clearance), chosen at the first of them. The hand is
+  // nearly 20 cm along its fingers: over a block 12 cm from a screen, shoved toward it, it met the
+  // screen and stood still (hidden peg, level 3: 3 of the 7 failures of seeds 5000 and 7000 at
+  // stop 81).
   bool hand_clearance = true;
   template <class A>
   void Serialize(A& a) {

@@ -84,6 +84,28 @@ Eigen::Vector3d SpiralPoint(int n, double radius) {
   return {b * theta * std::cos(theta), b * theta * std::sin(theta), 0.0};
 }
 
+// Where the tool goes for a carried site (-1: none, the tool itself) to land on `point`, turned
+// `rotation`, holding what it holds as it does now.
+Eigen::Vector3d ToolFor(const Env& env, int carry, const Eigen::Vector3d& point,
+                        const core::Quat& rotation) {
+  if (carry < 0) return point;
+  const core::Pose ee = env.EePose();
+  const Eigen::Vector3d site_in_tool =
+      ee.rotation.conjugate() * (env.SitePose(carry).translation - ee.translation);
+  return point - rotation * site_in_tool;
+}
+
+// A parallel gripper is symmetric, and so may be what it holds or aligns (a square peg): a move
+// step's finger directions that serve alike, in `frame`. They come in opposite pairs: direction
+// k is the (k / 2)-th turn of the fingers, reversed when k is odd.
+core::Quat FingerDirection(const ExpertStep& step, const core::Quat& frame, int k) {
+  const Eigen::Vector3d approach = frame * Eigen::Vector3d(step.approach.data());
+  const Eigen::Vector3d fingers = frame * Eigen::Vector3d(step.fingers.data());
+  const Eigen::Vector3d turned =
+      core::AxisAngle(approach, 2 * M_PI * (k / 2) / step.symmetry) * fingers;
+  return ToolOrientation(approach, k % 2 == 0 ? turned : Eigen::Vector3d(-turned));
+}
+
 }  // namespace
 
 int RefiningMove(const core::Pose& goal, const ActionLimits& limits) {
@@ -250,49 +272,62 @@ core::Pose ScriptedExpert::Target(const Env& env, const ExpertStep& step) {
     last_height_ = height;
     if (spiral_ > 0) target.translation += anchor.rotation * SpiralPoint(spiral_, step.search);
   }
-  // Where the tool goes for the target's point, turned `rotation`: with a carried site, so that,
-  // holding the object as it does now, the site lands there.
-  const auto tool_at = [&](const Eigen::Vector3d& point, const core::Quat& rotation) {
-    if (ids.carry < 0) return point;
-    const Eigen::Vector3d site_in_tool =
-        ee.rotation.conjugate() * (env.SitePose(ids.carry).translation - ee.translation);
-    return Eigen::Vector3d(point - rotation * site_in_tool);
-  };
   if (step.keep_orientation) {
     if (first) kept_rotation_ = ee.rotation;
     target.rotation = kept_rotation_;
   } else {
     const core::Quat frame = step.world_orientation ? core::Quat::Identity() : anchor.rotation;
-    const Eigen::Vector3d approach = frame * Eigen::Vector3d(step.approach.data());
-    const Eigen::Vector3d fingers = frame * Eigen::Vector3d(step.fingers.data());
-    // A parallel gripper is symmetric, and so may be what it holds or aligns (a square peg):
-    // of the finger directions that serve alike take the one nearest the tool when the step
-    // starts, and keep it for the whole step. They come in opposite pairs.
-    // Direction k is the (k / 2)-th turn of the fingers, reversed when k is odd.
-    const auto alike = [&](int k) {
-      const Eigen::Vector3d turned =
-          core::AxisAngle(approach, 2 * M_PI * (k / 2) / step.symmetry) * fingers;
-      return ToolOrientation(approach, k % 2 == 0 ? turned : Eigen::Vector3d(-turned));
-    };
     if (first) {
-      // Nearest first (ties to the lower k); with a clearance, the nearest whose tool pose at the
-      // target is clear, if any is.
+      // Of the finger directions that serve alike, the one nearest the tool when the step
+      // starts (ties to the lower k), kept for the whole step. With a clearance, at the first
+      // step of a chain, the nearest whose hand is clear at every target of the chain, if any is.
       std::vector<std::pair<double, int>> order;
       for (int k = 0; k < step.symmetry; ++k)
-        order.emplace_back(core::AngleBetween(alike(k), ee.rotation), k);
+        order.emplace_back(core::AngleBetween(FingerDirection(step, frame, k), ee.rotation), k);
       std::sort(order.begin(), order.end());
       finger_turn_ = order.front().second;
-      if (clearance_)
+      if (clearance_ && !Continues(step_))
         for (const auto& [angle, k] : order)
-          if (clearance_({tool_at(target.translation, alike(k)), alike(k)})) {
+          if (ChainClear(env, k)) {
             finger_turn_ = k;
             break;
           }
     }
-    target.rotation = alike(finger_turn_);
+    target.rotation = FingerDirection(step, frame, finger_turn_);
   }
-  target.translation = tool_at(target.translation, target.rotation);
+  target.translation = ToolFor(env, ids.carry, target.translation, target.rotation);
   return target;
+}
+
+bool ScriptedExpert::Continues(int j) const {
+  const auto& steps = task_.spec().expert.steps;
+  if (j <= 0 || j >= int(steps.size())) return false;
+  const ExpertStep &a = steps[j - 1], &b = steps[j];
+  const auto& ia = task_.index().expert_steps[j - 1];
+  const auto& ib = task_.index().expert_steps[j];
+  const auto turnable = [](const ExpertStep& s) {
+    return s.type == ExpertStepType::kMove && !s.keep_orientation && s.symmetry > 1;
+  };
+  const mjModel* m = task_.model();
+  return turnable(a) && turnable(b) && a.symmetry == b.symmetry && a.fingers == b.fingers &&
+         a.approach == b.approach && a.world_orientation == b.world_orientation &&
+         ia.carry == ib.carry && ia.site >= 0 && ib.site >= 0 &&
+         m->site_bodyid[ia.site] == m->site_bodyid[ib.site];
+}
+
+bool ScriptedExpert::ChainClear(const Env& env, int k) const {
+  const auto& steps = task_.spec().expert.steps;
+  for (int j = step_; j < int(steps.size()) && (j == step_ || Continues(j)); ++j) {
+    const ExpertStep& step = steps[j];
+    const auto& ids = task_.index().expert_steps[j];
+    const core::Pose anchor =
+        ids.site < 0 ? core::Pose::Identity() : YawFrame(env.SitePose(ids.site));
+    const core::Quat rotation =
+        FingerDirection(step, step.world_orientation ? core::Quat::Identity() : anchor.rotation, k);
+    const Eigen::Vector3d point = anchor * Eigen::Vector3d(step.offset.data());
+    if (!clearance_({ToolFor(env, ids.carry, point, rotation), rotation})) return false;
+  }
+  return true;
 }
 
 Action ScriptedExpert::HoldStill(const Env& env) const {

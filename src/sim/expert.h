@@ -60,9 +60,12 @@ class ScriptedExpert {
   // Whether the hand is clear of what is around it at a tool pose (robot base frame).
   using Clearance = std::function<bool(const core::Pose& tool)>;
   // A move step whose fingers may take any of several directions that serve alike (symmetry)
-  // takes the one nearest the tool's when the step starts. With a clearance, the nearest of those
-  // whose tool pose at the step's target is clear (the nearest if none is): the hand is nearly
-  // 20 cm along its fingers, and over a block 12 cm from a screen it met the screen.
+  // takes the one nearest the tool's when the step starts. With a clearance, the first step of a
+  // chain (steps that continue one another: Continues) takes the nearest of those whose tool pose
+  // is clear at the target of every step of the chain (the nearest if none is), and the steps
+  // after it keep it: the hand is nearly 20 cm along its fingers, and over a block 12 cm from a
+  // screen it met the screen; checked at each step's own target, the hand turned a quarter turn
+  // with the peg 6 mm over the hole, on its way down, and the tip came down beside it.
   void set_clearance(Clearance clearance) { clearance_ = std::move(clearance); }
   // Moves planned so far, and of them those whose optimization failed (moved as scripted).
   const PlanCounts& plans() const { return plans_; }
@@ -81,6 +84,12 @@ class ScriptedExpert {
  private:
   // Pose the tool should reach for the current step, in the robot base frame.
   core::Pose Target(const Env& env, const ExpertStep& step);
+  // Whether step j continues step j - 1: both moves whose fingers may take the same directions
+  // alike, in the frame of the same body, carrying the same site (a chain keeps one direction).
+  bool Continues(int j) const;
+  // Whether the hand, its fingers in direction k, is clear at the target of the current step and
+  // of each step after it that continues it.
+  bool ChainClear(const Env& env, int k) const;
   // The action that brings the tool toward `target`; for discrete actions sets
   // at_grid_target_ when no move helps.
   Action Toward(const Env& env, const core::Pose& target, double closure);
