@@ -165,25 +165,39 @@ TwinActor::TwinActor(std::shared_ptr<const sim::Task> twin, reality::Robot& robo
     expert_.set_clearance([this](const core::Pose& at) { return HandClear(at); });
 }
 
-double TwinActor::DistanceToHand(const core::Pose& tool, const Eigen::Vector3d& point) const {
-  double nearest = std::numeric_limits<double>::infinity();
+std::vector<TwinActor::PosedGeom> TwinActor::HandAt(const core::Pose& tool) const {
+  std::vector<PosedGeom> posed;
   for (const auto& [g, in_tool] : hand_) {
     const core::Pose pose = tool * in_tool;
-    nearest = std::min(nearest, DistanceToGeom(env_.model(), g, pose.rotation.toRotationMatrix(),
-                                               pose.translation, point));
+    posed.push_back({g, pose.rotation.toRotationMatrix(), pose.translation});
   }
+  return posed;
+}
+
+double TwinActor::DistanceToHand(const std::vector<PosedGeom>& hand,
+                                 const Eigen::Vector3d& point) const {
+  double nearest = std::numeric_limits<double>::infinity();
+  for (const PosedGeom& g : hand)
+    nearest =
+        std::min(nearest, DistanceToGeom(env_.model(), g.geom, g.rotation, g.position, point));
   return nearest;
 }
 
 bool TwinActor::HandClear(const core::Pose& tool) const {
+  const std::vector<PosedGeom> at = HandAt(tool);
   int in_the_way = 0;
-  for (std::size_t j = 0; j < unexplained_.size(); ++j) {
-    const Eigen::Vector3d& p = unexplained_[j];
-    if ((p - tool.translation).norm() > kHandReach) continue;
-    if (DistanceToHand(tool, p) >= kHandMargin ||
-        DistanceToHand(unexplained_tool_[j], p) < kHandStray || NearAnObject(p, kOccluderMargin))
-      continue;
-    if (++in_the_way >= kHandMinPoints) return false;
+  for (std::size_t look = 0; look < unexplained_hand_.size(); ++look) {
+    const auto& [first, then] = unexplained_hand_[look];
+    const std::size_t end = look + 1 < unexplained_hand_.size() ? unexplained_hand_[look + 1].first
+                                                                : unexplained_.size();
+    for (std::size_t j = first; j < end; ++j) {
+      const Eigen::Vector3d& p = unexplained_[j];
+      if ((p - tool.translation).norm() > kHandReach) continue;
+      if (DistanceToHand(at, p) >= kHandMargin || DistanceToHand(then, p) < kHandStray ||
+          NearAnObject(p, kOccluderMargin))
+        continue;
+      if (++in_the_way >= kHandMinPoints) return false;
+    }
   }
   return true;
 }
@@ -218,7 +232,7 @@ void TwinActor::Begin(uint64_t seed) {
   carried_ = -1;
   reach_measured_ = false;
   unexplained_.clear();
-  unexplained_tool_.clear();
+  unexplained_hand_.clear();
 }
 
 // A block behind a screen is fitted to the screen (on the proxy: 281 points explained, 1460 inside
@@ -338,10 +352,8 @@ double TwinActor::LookAndEstimate(const reality::Observation& o, double moved_bo
   if (relook_.occluders) {
     const std::size_t before = unexplained_.size();
     for (const Eigen::Vector3d& p : points)
-      if (!NearAnObject(p, kOccluderMargin)) {
-        unexplained_.push_back(p);
-        unexplained_tool_.push_back(env_.EePose());
-      }
+      if (!NearAnObject(p, kOccluderMargin)) unexplained_.push_back(p);
+    if (unexplained_.size() > before) unexplained_hand_.emplace_back(before, HandAt(env_.EePose()));
     spdlog::debug("twin actor, look {}: {} points no object explains", looks_,
                   unexplained_.size() - before);
   }

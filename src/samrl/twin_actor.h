@@ -213,8 +213,15 @@ class TwinActor : public reality::Operator {
   // Whether a fit is one to act on: seen by RelookOptions::min_points points at least (as many
   // for the last look's pixels), and with more of the frame for it than against it.
   bool Trusted(const ObjectPose& e) const;
-  // How far `point` is from the hand with the tool at `tool` (both in the base frame).
-  double DistanceToHand(const core::Pose& tool, const Eigen::Vector3d& point) const;
+  // The hand's geoms posed with the tool at `tool` (base frame).
+  struct PosedGeom {
+    int geom;
+    Eigen::Matrix3d rotation;
+    Eigen::Vector3d position;
+  };
+  std::vector<PosedGeom> HandAt(const core::Pose& tool) const;
+  // How far `point` (base frame) is from the hand posed as `hand`.
+  double DistanceToHand(const std::vector<PosedGeom>& hand, const Eigen::Vector3d& point) const;
   // Whether the hand at `tool` (base frame) is clear of the trial's points no object explains
   // (RelookOptions::hand_clearance).
   bool HandClear(const core::Pose& tool) const;
@@ -236,7 +243,8 @@ class TwinActor : public reality::Operator {
   // fixed geometry the twin has elsewhere. Those that the current beliefs still leave unexplained
   // are the looks' occluders.
   std::vector<Eigen::Vector3d> unexplained_;
-  std::vector<core::Pose> unexplained_tool_;  // the tool's pose when each was seen
+  // For each look that added to them, the index of its first point and the hand as it was then.
+  std::vector<std::pair<std::size_t, std::vector<PosedGeom>>> unexplained_hand_;
   double trust_points_ = 1;  // RelookOptions::min_points for the last look's pixels
   // The hand's geoms, each with its pose in the tool's frame.
   std::vector<std::pair<int, core::Pose>> hand_;
