@@ -146,6 +146,7 @@ TwinActor::TwinActor(std::shared_ptr<const sim::Task> twin, reality::Robot& robo
       relook_(relook) {
   for (const auto& name : twin->spec().objects)
     bodies_.push_back(mj_name2id(env_.model(), mjOBJ_BODY, name.c_str()));
+  if (!relook_.hand_clearance) return;
   // The hand: the robot's geoms on the tool's body and the bodies below it (the fingers).
   const mjModel* m = env_.model();
   env_.Reset(0, 0);
@@ -161,8 +162,7 @@ TwinActor::TwinActor(std::shared_ptr<const sim::Task> twin, reality::Robot& robo
                            core::Quat(Eigen::Matrix3d(rotation))};
     hand_.emplace_back(g, tool.Inverse() * world);
   }
-  if (relook_.hand_clearance)
-    expert_.set_clearance([this](const core::Pose& at) { return HandClear(at); });
+  expert_.set_clearance([this](const core::Pose& at) { return HandClear(at); });
 }
 
 std::vector<TwinActor::PosedGeom> TwinActor::HandAt(const core::Pose& tool) const {
@@ -353,7 +353,9 @@ double TwinActor::LookAndEstimate(const reality::Observation& o, double moved_bo
     const std::size_t before = unexplained_.size();
     for (const Eigen::Vector3d& p : points)
       if (!NearAnObject(p, kOccluderMargin)) unexplained_.push_back(p);
-    if (unexplained_.size() > before) unexplained_hand_.emplace_back(before, HandAt(env_.EePose()));
+    // The hand as it was when they were seen, for the hand clearance only.
+    if (relook_.hand_clearance && unexplained_.size() > before)
+      unexplained_hand_.emplace_back(before, HandAt(env_.EePose()));
     spdlog::debug("twin actor, look {}: {} points no object explains", looks_,
                   unexplained_.size() - before);
   }
