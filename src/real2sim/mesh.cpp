@@ -1,9 +1,11 @@
 #include "real2sim/mesh.h"
 
+#include <embree3/rtcore.h>
 #include <open3d/Open3D.h>
 #include <open3d/t/geometry/RaycastingScene.h>
 
 #include <Eigen/Eigenvalues>
+#include <mutex>
 #include <numeric>
 #include <tuple>
 
@@ -129,6 +131,19 @@ open3d::core::Tensor PointTensor(const std::vector<Eigen::Vector3d>& points) {
 struct SurfaceQuery::Impl {
   open3d::t::geometry::RaycastingScene scene;
   bool empty = true;
+  // The rays go to an Embree scene of their own, built at the first cast, as the depth renderer's
+  // (sim::GeomScene). Debian 12's Open3D, on Debian's Embree, missed rays it should hit (straight
+  // down onto the middle of a 10 cm square, in a program of its own; in this library a ray from
+  // below), while its distance queries are right.
+  std::vector<float> vertices;
+  std::vector<uint32_t> triangles;
+  std::once_flag rays_built;
+  RTCDevice device = nullptr;
+  RTCScene rays = nullptr;
+  ~Impl() {
+    if (rays) rtcReleaseScene(rays);
+    if (device) rtcReleaseDevice(device);
+  }
 };
 
 SurfaceQuery::SurfaceQuery(const Mesh& mesh) : impl_(std::make_unique<Impl>()) {
@@ -142,6 +157,8 @@ SurfaceQuery::SurfaceQuery(const Mesh& mesh) : impl_(std::make_unique<Impl>()) {
   impl_->empty = false;
   impl_->scene.AddTriangles(o3c::Tensor(v, {int64_t(mesh.vertices.size()), 3}, o3c::Float32),
                             o3c::Tensor(t, {int64_t(t.size() / 3), 3}, o3c::UInt32));
+  impl_->vertices = std::move(v);
+  impl_->triangles = std::move(t);
 }
 
 SurfaceQuery::~SurfaceQuery() = default;
@@ -169,6 +186,59 @@ std::vector<Eigen::Vector3d> SurfaceQuery::Closest(const std::vector<Eigen::Vect
   for (std::size_t i = 0; i < points.size(); ++i)
     closest.emplace_back(c[3 * i], c[3 * i + 1], c[3 * i + 2]);
   return closest;
+}
+
+std::vector<double> SurfaceQuery::RayHits(const std::vector<Eigen::Vector3d>& origins,
+                                          const std::vector<Eigen::Vector3d>& directions) const {
+  if (origins.size() != directions.size())
+    throw core::Error("ray casting: " + std::to_string(origins.size()) + " origins for " +
+                      std::to_string(directions.size()) + " directions");
+  std::vector<double> hits(origins.size(), std::numeric_limits<double>::infinity());
+  if (impl_->empty || origins.empty()) return hits;
+  std::call_once(impl_->rays_built, [this] {
+    impl_->device = rtcNewDevice("threads=1,set_affinity=0");
+    if (!impl_->device)
+      throw core::Error("Embree: could not create a device (error " +
+                        std::to_string(rtcGetDeviceError(nullptr)) + ")");
+    RTCGeometry tris = rtcNewGeometry(impl_->device, RTC_GEOMETRY_TYPE_TRIANGLE);
+    auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(tris, RTC_BUFFER_TYPE_VERTEX, 0,
+                                                          RTC_FORMAT_FLOAT3, 3 * sizeof(float),
+                                                          impl_->vertices.size() / 3));
+    std::copy(impl_->vertices.begin(), impl_->vertices.end(), v);
+    auto* t = static_cast<unsigned*>(rtcSetNewGeometryBuffer(tris, RTC_BUFFER_TYPE_INDEX, 0,
+                                                             RTC_FORMAT_UINT3, 3 * sizeof(unsigned),
+                                                             impl_->triangles.size() / 3));
+    std::copy(impl_->triangles.begin(), impl_->triangles.end(), t);
+    rtcCommitGeometry(tris);
+    impl_->rays = rtcNewScene(impl_->device);
+    // Robust: a ray along the edge two triangles share meets one of them.
+    rtcSetSceneFlags(impl_->rays, RTC_SCENE_FLAG_ROBUST);
+    rtcAttachGeometry(impl_->rays, tris);
+    rtcReleaseGeometry(tris);
+    rtcCommitScene(impl_->rays);
+  });
+  for (std::size_t i = 0; i < origins.size(); ++i) {
+    RTCIntersectContext context;
+    rtcInitIntersectContext(&context);
+    RTCRayHit rh;
+    rh.ray.org_x = float(origins[i].x());
+    rh.ray.org_y = float(origins[i].y());
+    rh.ray.org_z = float(origins[i].z());
+    rh.ray.dir_x = float(directions[i].x());
+    rh.ray.dir_y = float(directions[i].y());
+    rh.ray.dir_z = float(directions[i].z());
+    rh.ray.tnear = 0.0f;
+    rh.ray.tfar = std::numeric_limits<float>::infinity();
+    rh.ray.time = 0.0f;
+    rh.ray.mask = ~0u;
+    rh.ray.id = 0;
+    rh.ray.flags = 0;
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    rtcIntersect1(impl_->rays, &context, &rh);
+    if (rh.hit.geomID != RTC_INVALID_GEOMETRY_ID) hits[i] = rh.ray.tfar;
+  }
+  return hits;
 }
 
 std::vector<double> SurfaceDistances(const std::vector<Eigen::Vector3d>& points, const Mesh& mesh) {

@@ -123,6 +123,11 @@ class SurfaceQuery {
   // Each point's nearest point on the triangles (the mesh must have some).
   std::vector<Eigen::Vector3d> Closest(const std::vector<Eigen::Vector3d>& points,
                                        int threads = 0) const;
+  // How far each ray, from `origins[i]` along the unit `directions[i]`, goes before it first meets
+  // the triangles, from either side (infinity where it never does). Throws core::Error when the
+  // counts differ.
+  std::vector<double> RayHits(const std::vector<Eigen::Vector3d>& origins,
+                              const std::vector<Eigen::Vector3d>& directions) const;
 
  private:
   struct Impl;

@@ -6,6 +6,8 @@
 #include <cstdio>
 #include <random>
 
+#include "core/error.h"
+
 namespace twinforge::real2sim {
 namespace {
 
@@ -101,6 +103,25 @@ TEST(Mesh, SurfaceDistancesAreToTheTrianglesNotToTheirCorners) {
   EXPECT_NEAR(d[1], 0.01, 1e-6);   // below
   EXPECT_NEAR(d[2], 0.05, 1e-6);   // off the edge: to the edge (3 cm, 4 cm)
   EXPECT_TRUE(std::isinf(SurfaceDistances({{0, 0, 0}}, Mesh{})[0]));
+}
+
+// A ray meets the square where it crosses its plane inside it, from above or below, and along the
+// diagonal its two triangles share; one that passes beside it, or a surface without triangles,
+// never.
+TEST(Mesh, RayHitsAreWhereARayFirstMeetsTheTriangles) {
+  Mesh square;
+  square.vertices = {{0, 0, 0}, {0.1, 0, 0}, {0.1, 0.1, 0}, {0, 0.1, 0}};
+  square.triangles = {{0, 1, 2}, {0, 2, 3}};
+  const SurfaceQuery query(square);
+  const Eigen::Vector3d down(0, 0, -1);
+  const auto hits = query.RayHits({{0.05, 0.05, 0.3}, {0.15, 0.05, 0.3}, {-0.1, 0.05, -0.2}},
+                                  {down, down, Eigen::Vector3d(0.6, 0, 0.8)});
+  ASSERT_EQ(hits.size(), 3u);
+  EXPECT_NEAR(hits[0], 0.3, 1e-6);
+  EXPECT_TRUE(std::isinf(hits[1])) << "beside the square";
+  EXPECT_NEAR(hits[2], 0.25, 1e-6) << "from below, slanted: 0.2 m up over 0.25 m";
+  EXPECT_TRUE(std::isinf(SurfaceQuery(Mesh{}).RayHits({{0, 0, 1}}, {down})[0]));
+  EXPECT_THROW(query.RayHits({{0, 0, 1}}, {}), core::Error);
 }
 
 // A triangle without area (a tessellated pole, a collapsed scan face) is skipped: Open3D's
