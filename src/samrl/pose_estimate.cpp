@@ -184,6 +184,37 @@ core::Pose ObjectPoseEstimator::Settled(int i, const core::Pose& pose,
                 options_.settle > 0 ? options_.settle : 0.003, bound);
 }
 
+int ObjectPoseEstimator::SeenThrough(int i, const core::Pose& pose, const Eigen::Vector3d& camera,
+                                     const std::vector<Eigen::Vector3d>& points,
+                                     double margin) const {
+  const Model& model = *models_.at(i);
+  const core::Pose inv = pose.Inverse();
+  const Eigen::Vector3d from = inv * camera;
+  // Only the rays that pass the object's bounding sphere can meet it.
+  const Eigen::Vector3d lo(model.lo.x(), model.lo.y(), model.z_min);
+  const Eigen::Vector3d hi(model.hi.x(), model.hi.y(), model.z_max);
+  const Eigen::Vector3d centre = 0.5 * (lo + hi);
+  const double radius = 0.5 * (hi - lo).norm();
+  std::vector<Eigen::Vector3d> origins, directions;
+  std::vector<double> lengths;
+  for (const Eigen::Vector3d& p : points) {
+    const Eigen::Vector3d to = inv * p - from;
+    const double length = to.norm();
+    if (length <= margin) continue;
+    const Eigen::Vector3d way = to / length;
+    const double along = std::clamp((centre - from).dot(way), 0.0, length);
+    if ((from + along * way - centre).norm() > radius) continue;
+    origins.push_back(from);
+    directions.push_back(way);
+    lengths.push_back(length);
+  }
+  const std::vector<double> hits = model.surface->RayHits(origins, directions);
+  int through = 0;
+  for (std::size_t k = 0; k < hits.size(); ++k)
+    if (hits[k] < lengths[k] - margin) ++through;
+  return through;
+}
+
 int ObjectPoseEstimator::symmetry(int i) const { return models_.at(i)->symmetry; }
 
 core::Pose ObjectPoseEstimator::NearestLookAlike(int i, const core::Pose& pose) const {

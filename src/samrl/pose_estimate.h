@@ -148,6 +148,12 @@ class ObjectPoseEstimator {
   core::Pose Settled(int i, const core::Pose& pose, const std::vector<Eigen::Vector3d>& points,
                      double bound) const;
 
+  // Of `points` (robot base frame) seen from `camera`, how many lie farther along their rays than
+  // body i's surface at `pose` would be, by more than `margin` (m): the camera saw through where
+  // the object would stand. That is free space a fit's score does not read: the table seen
+  // behind it is not in the foreground.
+  int SeenThrough(int i, const core::Pose& pose, const Eigen::Vector3d& camera,
+                  const std::vector<Eigen::Vector3d>& points, double margin) const;
   // The twin's own pose of body i.
   const core::Pose& nominal(int i) const;
   // How many turns about its vertical axis leave body i looking the same (4: a square peg, 2, or
