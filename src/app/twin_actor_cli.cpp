@@ -98,6 +98,13 @@ void TwinActorCli::Add(CLI::App* c) {
               "twin actor: of the finger directions the expert may take alike, take the nearest "
               "whose hand keeps clear of what the frames showed that no object explains (a "
               "screen beside the hole; default on)");
+  c->add_option(
+       "--seen-through-points", relook.seen_through_points,
+       "twin actor: a later look's fit that moves an object is ignored when its frame "
+       "sees through where the fit would put it (the table where a block would stand) at "
+       "this many points or more (in a 640x480 frame), and where it was believed at fewer; "
+       "0: not checked")
+      ->check(CLI::NonNegativeNumber);
   c->add_option("--max-move", relook.max_move,
                 "twin actor: m beyond which an object found is taken for a misfit (clutter taken "
                 "for it), not a push, and ignored")
@@ -185,6 +192,7 @@ TwinActorOnRobot::TwinActorOnRobot(reality::Robot& robot, const sim::TaskSpec& t
   header_["refine"] = relook.refine;
   header_["min_points"] = relook.min_points;
   header_["hand_clearance"] = relook.hand_clearance;
+  header_["seen_through_points"] = relook.seen_through_points;
   header_["capture"] = {capture.width, capture.height};
 }
 

@@ -72,6 +72,11 @@ constexpr double kHeldMargin = 0.01;
 constexpr double kHeldBound = 0.006;
 constexpr int kHeldMinPoints = 50;
 
+// m: a frame's point counts as seen through where an object would stand when it lies this much
+// farther along its ray than the object's surface there (the depth's noise and the frame's
+// registration are a few mm).
+constexpr double kSeenThroughMargin = 0.01;
+
 // The looks' occluders: points farther than this from every object where the actor believes it
 // (its own points off its drawing by a few mm are not in the way), in columns of this size with
 // this many points at least (a 640x480 frame puts a few hundred on a 2 cm square of a box's top
@@ -280,20 +285,36 @@ double TwinActor::LookAndEstimate(const reality::Observation& o, double moved_bo
   const bool measure_held = carried_ >= 0 && relook_.measure_held && !blocked;
   bool refine = relook_.refine && !blocked;
   std::vector<Eigen::Vector3d> points, held_points, h;
+  // Each frame as registered, all of it (the table too), and where it was seen from; only for the
+  // points seen through a fit.
+  std::vector<std::pair<Eigen::Vector3d, std::vector<Eigen::Vector3d>>> frames;
   double pixels = 0;
   for (const reality::RgbdFrame& frame : look_(context)) {
     pixels += double(frame.intrinsics.width) * frame.intrinsics.height;
-    const auto p =
-        estimator_.Foreground(FramePoints(frame, camera_correction_), o.q, o.gripper_width, nullptr,
-                              carried_, held, measure_held ? &h : nullptr, kHeldMargin);
+    std::vector<Eigen::Vector3d> all = FramePoints(frame, camera_correction_);
+    core::Pose registered;
+    const auto p = estimator_.Foreground(all, o.q, o.gripper_width, &registered, carried_, held,
+                                         measure_held ? &h : nullptr, kHeldMargin);
     points.insert(points.end(), p.begin(), p.end());
     held_points.insert(held_points.end(), h.begin(), h.end());
+    if (relook_.seen_through_points == 0) continue;
+    for (Eigen::Vector3d& x : all) x = registered * x;
+    frames.emplace_back(registered * (frame.extrinsics * camera_correction_).translation,
+                        std::move(all));
   }
+  const auto seen_through = [&](int i, const core::Pose& pose) {
+    int through = 0;
+    for (const auto& [camera, all] : frames)
+      through += estimator_.SeenThrough(i, pose, camera, all, kSeenThroughMargin);
+    return through;
+  };
+  // RelookOptions::min_points and seen_through_points are for a 640x480 frame: the points on an
+  // object go as the pixels.
+  const double per_frame = pixels / (640.0 * 480.0);
   std::vector<bool> skip(bodies_.size(), false);
   if (carried_ >= 0) skip[carried_] = true;
   const std::vector<ObjectPose> found = estimator_.Estimate(points, skip);
-  // RelookOptions::min_points is for a 640x480 frame: the points on an object go as the pixels.
-  trust_points_ = std::max(1.0, std::ceil(relook_.min_points * pixels / (640.0 * 480.0)));
+  trust_points_ = std::max(1.0, std::ceil(relook_.min_points * per_frame));
   ++looks_;
   const bool first = estimates_.empty();
   if (first) estimates_ = found;
@@ -325,9 +346,23 @@ double TwinActor::LookAndEstimate(const reality::Observation& o, double moved_bo
           found[i].inliers, found[i].outliers);
     if (again && (!Trusted(found[i]) || (d < moved_bound && !refine))) continue;
     if (again && d > relook_.max_move) {
-      spdlog::info("twin actor: look {} fitted {} {:.0f} mm away, too far for a push; ignored",
-                   looks_, found[i].body, 1e3 * d);
+      spdlog::info(
+          "twin actor: look {} fitted {} {:.0f} mm away at ({:.3f}, {:.3f}), too far for a push; "
+          "ignored",
+          looks_, found[i].body, 1e3 * d, found[i].pose.translation.x(),
+          found[i].pose.translation.y());
       continue;
+    }
+    if (again && d >= moved_bound && relook_.seen_through_points > 0) {
+      const int there = seen_through(int(i), found[i].pose);
+      const int believed = seen_through(int(i), estimates_[i].pose);
+      const double enough = std::max(1.0, std::ceil(relook_.seen_through_points * per_frame));
+      const bool refused = there >= enough && believed < enough;
+      spdlog::log(refused ? spdlog::level::info : spdlog::level::debug,
+                  "twin actor: look {} fitted {} {:.0f} mm away; the frames see through it there "
+                  "at {} points, where it was believed at {}{}",
+                  looks_, found[i].body, 1e3 * d, there, believed, refused ? "; ignored" : "");
+      if (refused) continue;
     }
     if (!again || d >= moved_bound) moved = std::max(moved, d);
     const core::Pose believed = estimates_[i].pose;
