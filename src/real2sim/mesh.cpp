@@ -1,6 +1,5 @@
 #include "real2sim/mesh.h"
 
-#include <embree3/rtcore.h>
 #include <open3d/Open3D.h>
 #include <open3d/t/geometry/RaycastingScene.h>
 
@@ -14,6 +13,7 @@
 #include "core/log.h"
 #include "core/rng.h"
 #include "core/se3.h"
+#include "sim/embree_ray.h"
 #include "sim/geom_scene.h"
 
 namespace twinforge::real2sim {
@@ -200,42 +200,13 @@ std::vector<double> SurfaceQuery::RayHits(const std::vector<Eigen::Vector3d>& or
     if (!impl_->device)
       throw core::Error("Embree: could not create a device (error " +
                         std::to_string(rtcGetDeviceError(nullptr)) + ")");
-    RTCGeometry tris = rtcNewGeometry(impl_->device, RTC_GEOMETRY_TYPE_TRIANGLE);
-    auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(tris, RTC_BUFFER_TYPE_VERTEX, 0,
-                                                          RTC_FORMAT_FLOAT3, 3 * sizeof(float),
-                                                          impl_->vertices.size() / 3));
-    std::copy(impl_->vertices.begin(), impl_->vertices.end(), v);
-    auto* t = static_cast<unsigned*>(rtcSetNewGeometryBuffer(tris, RTC_BUFFER_TYPE_INDEX, 0,
-                                                             RTC_FORMAT_UINT3, 3 * sizeof(unsigned),
-                                                             impl_->triangles.size() / 3));
-    std::copy(impl_->triangles.begin(), impl_->triangles.end(), t);
-    rtcCommitGeometry(tris);
-    impl_->rays = rtcNewScene(impl_->device);
     // Robust: a ray along the edge two triangles share meets one of them.
-    rtcSetSceneFlags(impl_->rays, RTC_SCENE_FLAG_ROBUST);
-    rtcAttachGeometry(impl_->rays, tris);
-    rtcReleaseGeometry(tris);
-    rtcCommitScene(impl_->rays);
+    impl_->rays =
+        sim::TriangleScene(impl_->device, impl_->vertices, impl_->triangles, RTC_SCENE_FLAG_ROBUST);
   });
   for (std::size_t i = 0; i < origins.size(); ++i) {
-    RTCIntersectContext context;
-    rtcInitIntersectContext(&context);
-    RTCRayHit rh;
-    rh.ray.org_x = float(origins[i].x());
-    rh.ray.org_y = float(origins[i].y());
-    rh.ray.org_z = float(origins[i].z());
-    rh.ray.dir_x = float(directions[i].x());
-    rh.ray.dir_y = float(directions[i].y());
-    rh.ray.dir_z = float(directions[i].z());
-    rh.ray.tnear = 0.0f;
-    rh.ray.tfar = std::numeric_limits<float>::infinity();
-    rh.ray.time = 0.0f;
-    rh.ray.mask = ~0u;
-    rh.ray.id = 0;
-    rh.ray.flags = 0;
-    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-    rtcIntersect1(impl_->rays, &context, &rh);
+    const Eigen::Vector3f o = origins[i].cast<float>(), d = directions[i].cast<float>();
+    const RTCRayHit rh = sim::FirstHit(impl_->rays, o.data(), d.data());
     if (rh.hit.geomID != RTC_INVALID_GEOMETRY_ID) hits[i] = rh.ray.tfar;
   }
   return hits;

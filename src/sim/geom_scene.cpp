@@ -1,13 +1,12 @@
 #include "sim/geom_scene.h"
 
-#include <embree3/rtcore.h>
-
 #include <array>
 #include <cmath>
 #include <limits>
 #include <string>
 
 #include "core/error.h"
+#include "sim/embree_ray.h"
 
 namespace twinforge::sim {
 
@@ -125,20 +124,7 @@ GeomScene::GeomScene(const mjModel* m) : embree_(std::make_unique<Embree>()) {
   for (int g = 0; g < m->ngeom; ++g) {
     const TriangleMesh mesh = TessellateGeom(m, g);
     if (mesh.triangles.empty()) continue;
-    RTCGeometry tris = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
-    auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(tris, RTC_BUFFER_TYPE_VERTEX, 0,
-                                                          RTC_FORMAT_FLOAT3, 3 * sizeof(float),
-                                                          mesh.vertices.size() / 3));
-    std::copy(mesh.vertices.begin(), mesh.vertices.end(), v);
-    auto* t = static_cast<unsigned*>(rtcSetNewGeometryBuffer(tris, RTC_BUFFER_TYPE_INDEX, 0,
-                                                             RTC_FORMAT_UINT3, 3 * sizeof(unsigned),
-                                                             mesh.triangles.size() / 3));
-    std::copy(mesh.triangles.begin(), mesh.triangles.end(), t);
-    rtcCommitGeometry(tris);
-    RTCScene shape = rtcNewScene(device);
-    rtcAttachGeometry(shape, tris);
-    rtcReleaseGeometry(tris);
-    rtcCommitScene(shape);
+    RTCScene shape = TriangleScene(device, mesh.vertices, mesh.triangles);
     embree_->shapes.push_back(shape);
 
     RTCGeometry instance = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_INSTANCE);
@@ -183,6 +169,31 @@ void GeomScene::Update(const mjModel* m, const mjData* d, unsigned hidden_groups
 }
 
 GeomScene::Hit GeomScene::Cast(const float origin[3], const float direction[3]) const {
+  const RTCRayHit rh = FirstHit(embree_->top, origin, direction);
+  if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return {};
+  return {rh.ray.tfar, geom_of_instance_[rh.hit.instID[0]]};
+}
+
+RTCScene TriangleScene(RTCDevice device, const std::vector<float>& vertices,
+                       const std::vector<unsigned>& triangles, RTCSceneFlags flags) {
+  RTCGeometry tris = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
+  auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(
+      tris, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), vertices.size() / 3));
+  std::copy(vertices.begin(), vertices.end(), v);
+  auto* t = static_cast<unsigned*>(rtcSetNewGeometryBuffer(tris, RTC_BUFFER_TYPE_INDEX, 0,
+                                                           RTC_FORMAT_UINT3, 3 * sizeof(unsigned),
+                                                           triangles.size() / 3));
+  std::copy(triangles.begin(), triangles.end(), t);
+  rtcCommitGeometry(tris);
+  RTCScene scene = rtcNewScene(device);
+  rtcSetSceneFlags(scene, flags);
+  rtcAttachGeometry(scene, tris);
+  rtcReleaseGeometry(tris);  // the scene holds it
+  rtcCommitScene(scene);
+  return scene;
+}
+
+RTCRayHit FirstHit(RTCScene scene, const float origin[3], const float direction[3]) {
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
   RTCRayHit rh;
@@ -200,9 +211,8 @@ GeomScene::Hit GeomScene::Cast(const float origin[3], const float direction[3]) 
   rh.ray.flags = 0;
   rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
   rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-  rtcIntersect1(embree_->top, &context, &rh);
-  if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return {};
-  return {rh.ray.tfar, geom_of_instance_[rh.hit.instID[0]]};
+  rtcIntersect1(scene, &context, &rh);
+  return rh;
 }
 
 std::array<double, 3> UnitShapeScale(const mjModel* m, int g) {
