@@ -154,6 +154,7 @@ class ObjectPoseEstimator {
   // behind it is not in the foreground.
   int SeenThrough(int i, const core::Pose& pose, const Eigen::Vector3d& camera,
                   const std::vector<Eigen::Vector3d>& points, double margin) const;
+
   // The twin's own pose of body i.
   const core::Pose& nominal(int i) const;
   // How many turns about its vertical axis leave body i looking the same (4: a square peg, 2, or
