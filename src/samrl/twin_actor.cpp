@@ -285,9 +285,14 @@ double TwinActor::LookAndEstimate(const reality::Observation& o, double moved_bo
   const bool measure_held = carried_ >= 0 && relook_.measure_held && !blocked;
   bool refine = relook_.refine && !blocked;
   std::vector<Eigen::Vector3d> points, held_points, h;
-  // Each frame as registered, all of it (the table too), and where it was seen from; only for the
-  // points seen through a fit.
-  std::vector<std::pair<Eigen::Vector3d, std::vector<Eigen::Vector3d>>> frames;
+  // Each frame as seen, all of it (the table too), with its registration and where it was seen
+  // from; only for the points seen through a fit, which are counted in the frame's own coordinates.
+  struct Frame {
+    core::Pose registered;
+    Eigen::Vector3d camera;
+    std::vector<Eigen::Vector3d> all;
+  };
+  std::vector<Frame> frames;
   double pixels = 0;
   for (const reality::RgbdFrame& frame : look_(context)) {
     pixels += double(frame.intrinsics.width) * frame.intrinsics.height;
@@ -297,24 +302,26 @@ double TwinActor::LookAndEstimate(const reality::Observation& o, double moved_bo
                                          measure_held ? &h : nullptr, kHeldMargin);
     points.insert(points.end(), p.begin(), p.end());
     held_points.insert(held_points.end(), h.begin(), h.end());
-    if (relook_.seen_through_points == 0) continue;
-    for (Eigen::Vector3d& x : all) x = registered * x;
-    frames.emplace_back(registered * (frame.extrinsics * camera_correction_).translation,
-                        std::move(all));
+    if (relook_.seen_through_points > 0)
+      frames.push_back(
+          {registered, (frame.extrinsics * camera_correction_).translation, std::move(all)});
   }
   const auto seen_through = [&](int i, const core::Pose& pose) {
     int through = 0;
-    for (const auto& [camera, all] : frames)
-      through += estimator_.SeenThrough(i, pose, camera, all, kSeenThroughMargin);
+    for (const Frame& f : frames)
+      through += estimator_.SeenThrough(i, f.registered.Inverse() * pose, f.camera, f.all,
+                                        kSeenThroughMargin);
     return through;
   };
   // RelookOptions::min_points and seen_through_points are for a 640x480 frame: the points on an
   // object go as the pixels.
-  const double per_frame = pixels / (640.0 * 480.0);
+  const auto scaled = [pixels](int points) {
+    return std::max(1.0, std::ceil(points * pixels / (640.0 * 480.0)));
+  };
   std::vector<bool> skip(bodies_.size(), false);
   if (carried_ >= 0) skip[carried_] = true;
   const std::vector<ObjectPose> found = estimator_.Estimate(points, skip);
-  trust_points_ = std::max(1.0, std::ceil(relook_.min_points * per_frame));
+  trust_points_ = scaled(relook_.min_points);
   ++looks_;
   const bool first = estimates_.empty();
   if (first) estimates_ = found;
@@ -356,7 +363,7 @@ double TwinActor::LookAndEstimate(const reality::Observation& o, double moved_bo
     if (again && d >= moved_bound && relook_.seen_through_points > 0) {
       const int there = seen_through(int(i), found[i].pose);
       const int believed = seen_through(int(i), estimates_[i].pose);
-      const double enough = std::max(1.0, std::ceil(relook_.seen_through_points * per_frame));
+      const double enough = scaled(relook_.seen_through_points);
       const bool refused = there >= enough && believed < enough;
       spdlog::log(refused ? spdlog::level::info : spdlog::level::debug,
                   "twin actor: look {} fitted {} {:.0f} mm away; the frames see through it there "
