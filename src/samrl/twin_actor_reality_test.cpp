@@ -736,6 +736,33 @@ TEST(TwinActorOnReality, DoesNotFollowAFitTheFrameSeesThrough) {
   }
 }
 
+// In eval's level-3 trial 7 on the hidden peg (seeds 9000) the first look does not see the block
+// and the actor looks again at once; the look from over the hole and the one when blocked find it
+// shoved 32 mm, the peg comes over it again and is blocked again. The fifth look finds the block
+// 10 mm farther, and the peg goes in. With four looks (stop 81-83's default) it had none left,
+// and the search by feel ran out the trial 1 cm off the hole.
+TEST(TwinActorOnReality, AFifthLookFindsTheBlockAfterAFirstLookThatMissedIt) {
+  learn::PinMathThreads(1);
+  HiddenPeg peg(9000);
+  Scene& scene = peg.scene;
+  const uint64_t seed = core::MixSeed(9000, 3000 + 7);
+  for (const int looks : {RelookOptions{}.max_looks, 4}) {
+    RelookOptions relook = HiddenPeg::EvalRelook();
+    relook.max_looks = looks;
+    TwinActor actor(scene.task, scene.proxy, peg.active, true, {}, {}, relook);
+    scene.Run(actor, seed, 3, scene.spec.horizon, true);
+    const bool success = scene.proxy.QuerySuccess() == reality::SuccessAnswer::kSuccess;
+    EXPECT_EQ(actor.looks(), looks);
+    if (looks == 5) {
+      EXPECT_TRUE(success) << "five looks";
+      EXPECT_LT(SiteError(*scene.task, actor.estimates(), scene.proxy.hidden_env(), "hole_top"),
+                0.005);
+    } else {
+      EXPECT_FALSE(success) << "four looks";
+    }
+  }
+}
+
 // In eval's level-3 trial 6 on the hidden peg (seeds 5000), the shove moves the block 22 mm toward
 // the screen. The look from over the hole finds it, and the expert comes over it again, the
 // fingers (the hand's 19 cm) pointing at the screen as the nearest of the square peg's four ways:
