@@ -98,6 +98,20 @@ struct HiddenPeg {
     relook.measure_held = relook.refine = true;
     return relook;
   }
+  // How a trial on the proxy ended for the twin actor with the active look.
+  struct Outcome {
+    bool success = false;
+    double hole_error = 0;  // m: the hole's site as believed at the end, from the hidden one
+    int looks = 0, redone = 0;
+  };
+  // Eval's trial `trial` of the seed set `seeds` at `level`.
+  Outcome RunTrial(uint64_t seeds, int trial, int level, const RelookOptions& relook) {
+    TwinActor actor(scene.task, scene.proxy, active, true, {}, {}, relook);
+    scene.Run(actor, core::MixSeed(seeds, 1000 * level + trial), level, scene.spec.horizon, true);
+    return {scene.proxy.QuerySuccess() == reality::SuccessAnswer::kSuccess,
+            SiteError(*scene.task, actor.estimates(), scene.proxy.hidden_env(), "hole_top"),
+            actor.looks(), actor.redone_steps()};
+  }
   Scene scene;
   real2sim::TwinGeometry geometry;
   Look active;
@@ -682,9 +696,6 @@ TEST(TwinActorOnReality, FindsThePegInTheHandInTheFramesThatFindTheHole) {
 TEST(TwinActorOnReality, DoesNotFollowABlockFittedToASliver) {
   learn::PinMathThreads(1);
   HiddenPeg peg;
-  Scene& scene = peg.scene;
-  const Look& active = peg.active;
-  const uint64_t seed = core::MixSeed(5000, 3000 + 20);
   for (const int min_points : {RelookOptions{}.min_points, 50}) {
     RelookOptions relook = HiddenPeg::EvalRelook();
     relook.min_points = min_points;
@@ -693,17 +704,14 @@ TEST(TwinActorOnReality, DoesNotFollowABlockFittedToASliver) {
     // The frame also sees through the sliver's fit (918 points; 36 where the block was believed),
     // and that check refuses it too (stop 83): off here, for the count of points alone.
     relook.seen_through_points = 0;
-    TwinActor actor(scene.task, scene.proxy, active, true, {}, {}, relook);
-    scene.Run(actor, seed, 3, scene.spec.horizon, true);
-    EXPECT_EQ(actor.looks(), 3) << "min points " << min_points;
-    const double error =
-        SiteError(*scene.task, actor.estimates(), scene.proxy.hidden_env(), "hole_top");
+    const HiddenPeg::Outcome trial = peg.RunTrial(5000, 20, 3, relook);
+    EXPECT_EQ(trial.looks, 3) << "min points " << min_points;
     if (min_points > 100) {
-      EXPECT_EQ(actor.redone_steps(), 0);
-      EXPECT_LT(error, 0.005);
+      EXPECT_EQ(trial.redone, 0);
+      EXPECT_LT(trial.hole_error, 0.005);
     } else {
-      EXPECT_EQ(actor.redone_steps(), 1) << "the sliver taken for a push";
-      EXPECT_GT(error, 0.015);
+      EXPECT_EQ(trial.redone, 1) << "the sliver taken for a push";
+      EXPECT_GT(trial.hole_error, 0.015);
     }
   }
 }
@@ -716,22 +724,16 @@ TEST(TwinActorOnReality, DoesNotFollowABlockFittedToASliver) {
 TEST(TwinActorOnReality, DoesNotFollowAFitTheFrameSeesThrough) {
   learn::PinMathThreads(1);
   HiddenPeg peg(7000);
-  Scene& scene = peg.scene;
-  const uint64_t seed = core::MixSeed(7000, 3000 + 18);
   for (const int points : {RelookOptions{}.seen_through_points, 0}) {
     RelookOptions relook = HiddenPeg::EvalRelook();
     relook.seen_through_points = points;
-    TwinActor actor(scene.task, scene.proxy, peg.active, true, {}, {}, relook);
-    scene.Run(actor, seed, 3, scene.spec.horizon, true);
-    const double error =
-        SiteError(*scene.task, actor.estimates(), scene.proxy.hidden_env(), "hole_top");
-    const bool success = scene.proxy.QuerySuccess() == reality::SuccessAnswer::kSuccess;
+    const HiddenPeg::Outcome trial = peg.RunTrial(7000, 18, 3, relook);
     if (points > 0) {
-      EXPECT_LT(error, 0.005);
-      EXPECT_TRUE(success) << "the fit seen through not followed";
+      EXPECT_LT(trial.hole_error, 0.005);
+      EXPECT_TRUE(trial.success) << "the fit seen through not followed";
     } else {
-      EXPECT_GT(error, 0.03);
-      EXPECT_FALSE(success) << "the block believed 4 cm off";
+      EXPECT_GT(trial.hole_error, 0.03);
+      EXPECT_FALSE(trial.success) << "the block believed 4 cm off";
     }
   }
 }
@@ -744,21 +746,16 @@ TEST(TwinActorOnReality, DoesNotFollowAFitTheFrameSeesThrough) {
 TEST(TwinActorOnReality, AFifthLookFindsTheBlockAfterAFirstLookThatMissedIt) {
   learn::PinMathThreads(1);
   HiddenPeg peg(9000);
-  Scene& scene = peg.scene;
-  const uint64_t seed = core::MixSeed(9000, 3000 + 7);
   for (const int looks : {RelookOptions{}.max_looks, 4}) {
     RelookOptions relook = HiddenPeg::EvalRelook();
     relook.max_looks = looks;
-    TwinActor actor(scene.task, scene.proxy, peg.active, true, {}, {}, relook);
-    scene.Run(actor, seed, 3, scene.spec.horizon, true);
-    const bool success = scene.proxy.QuerySuccess() == reality::SuccessAnswer::kSuccess;
-    EXPECT_EQ(actor.looks(), looks);
+    const HiddenPeg::Outcome trial = peg.RunTrial(9000, 7, 3, relook);
+    EXPECT_EQ(trial.looks, looks);
     if (looks == 5) {
-      EXPECT_TRUE(success) << "five looks";
-      EXPECT_LT(SiteError(*scene.task, actor.estimates(), scene.proxy.hidden_env(), "hole_top"),
-                0.005);
+      EXPECT_TRUE(trial.success) << "five looks";
+      EXPECT_LT(trial.hole_error, 0.005);
     } else {
-      EXPECT_FALSE(success) << "four looks";
+      EXPECT_FALSE(trial.success) << "four looks";
     }
   }
 }
