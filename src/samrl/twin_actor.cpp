@@ -315,8 +315,8 @@ double TwinActor::LookAndEstimate(const reality::Observation& o, double moved_bo
   };
   // RelookOptions::min_points and seen_through_points are for a 640x480 frame: the points on an
   // object go as the pixels.
-  const auto scaled = [pixels](int points) {
-    return std::max(1.0, std::ceil(points * pixels / (640.0 * 480.0)));
+  const auto scaled = [pixels](int count) {
+    return std::max(1.0, std::ceil(count * pixels / (640.0 * 480.0)));
   };
   std::vector<bool> skip(bodies_.size(), false);
   if (carried_ >= 0) skip[carried_] = true;

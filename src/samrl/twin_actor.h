@@ -66,8 +66,8 @@ struct RelookOptions {
   // level 3 a first look that saw nothing, or a misfit followed, had used the third look before
   // the shove; with a fourth, 38/40 against 33/40 (seeds 5000; 5 won, none lost). 5 since stop
   // 84: on a third seed set (9000) two first looks that saw nothing left no look after the peg
-  // was blocked a second time; with a fifth, 35/40 against 33/40 (2 won, none lost; seeds 5000
-  // and 7000 alike, trial by trial).
+  // was blocked a second time; with a fifth, 35/40 against 33/40 (2 won, none lost; on seeds 5000,
+  // 7000 and 11000 the same outcomes, trial by trial).
   int max_looks = 5;
   double moved = 0.005;  // m, in the table's plane: an object found this far from where it was
                          // believed has moved; less is the estimate's own scatter, and ignored
