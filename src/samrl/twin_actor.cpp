@@ -285,10 +285,11 @@ double TwinActor::LookAndEstimate(const reality::Observation& o, double moved_bo
   const bool measure_held = carried_ >= 0 && relook_.measure_held && !blocked;
   bool refine = relook_.refine && !blocked;
   std::vector<Eigen::Vector3d> points, held_points, h;
-  // Each frame as seen, all of it (the table too), with its registration and where it was seen
-  // from; only for the points seen through a fit, which are counted in the frame's own coordinates.
+  // Each frame as seen, all of it (the table too), with the inverse of its registration (base ->
+  // the frame as seen) and where it was seen from; only for the points seen through a fit, which
+  // are counted in the frame's own coordinates.
   struct Frame {
-    core::Pose registered;
+    core::Pose unregistered;
     Eigen::Vector3d camera;
     std::vector<Eigen::Vector3d> all;
   };
@@ -303,14 +304,14 @@ double TwinActor::LookAndEstimate(const reality::Observation& o, double moved_bo
     points.insert(points.end(), p.begin(), p.end());
     held_points.insert(held_points.end(), h.begin(), h.end());
     if (relook_.seen_through_points > 0)
-      frames.push_back(
-          {registered, (frame.extrinsics * camera_correction_).translation, std::move(all)});
+      frames.push_back({registered.Inverse(), (frame.extrinsics * camera_correction_).translation,
+                        std::move(all)});
   }
   const auto seen_through = [&](int i, const core::Pose& pose) {
     int through = 0;
     for (const Frame& f : frames)
-      through += estimator_.SeenThrough(i, f.registered.Inverse() * pose, f.camera, f.all,
-                                        kSeenThroughMargin);
+      through +=
+          estimator_.SeenThrough(i, f.unregistered * pose, f.camera, f.all, kSeenThroughMargin);
     return through;
   };
   // RelookOptions::min_points and seen_through_points are for a 640x480 frame: the points on an
