@@ -159,11 +159,14 @@ class ObjectPoseEstimator {
   const core::Pose& nominal(int i) const;
   // How many turns about its vertical axis leave body i looking the same (4: a square peg, 2, or
   // 1): its vertices turned by a quarter (or a half) turn all lie on its surface, within 1 mm.
+  // 0: any turn does, to a tenth of its radius (a scanned pancake: round, its yaw not seen).
   int symmetry(int i) const;
   // Of the poses of body i that look alike (`pose` turned by its symmetry), the one whose
   // rotation is nearest `reference`'s, by default the twin's own. A fit cannot tell them apart;
   // a learned actor, trained on poses near the twin's own, needs the one it has seen, and an
-  // object seen again is the one believed before, not a quarter turn of it.
+  // object seen again is the one believed before, not a quarter turn of it. A round body takes
+  // the reference's rotation, turned about its own axis: its sites (a pancake's near edge) are
+  // where the twin has them round it, not where a fit's arbitrary turn put them.
   core::Pose NearestLookAlike(int i, const core::Pose& pose) const;
   core::Pose NearestLookAlike(int i, const core::Pose& pose, const core::Pose& reference) const;
 

@@ -341,7 +341,13 @@ double TwinActor::LookAndEstimate(const reality::Observation& o, double moved_bo
   // had the block over 3 mm off in 2 of 40 trials, the first estimate in 6).
   for (std::size_t i = 0; i < bodies_.size(); ++i) {
     if (skip[i]) continue;
-    const double d = (found[i].pose.translation - estimates_[i].pose.translation).head<2>().norm();
+    // How far it moved, between look-alike poses: a round object's fitted turn about its own axis
+    // swings its frame's origin when that is off the axis.
+    const double d =
+        (estimator_.NearestLookAlike(int(i), found[i].pose, estimates_[i].pose).translation -
+         estimates_[i].pose.translation)
+            .head<2>()
+            .norm();
     // An object no look has yet seen (or fitted in a way to trust) was believed where the twin
     // has it, or where it was misfitted: wherever it is found now, it was there all along.
     const bool first_sight = !first && Trusted(found[i]) && !Trusted(estimates_[i]);
@@ -381,10 +387,11 @@ double TwinActor::LookAndEstimate(const reality::Observation& o, double moved_bo
     // Seen again, a square block is the one believed, not a quarter turn of it: the expert's
     // step under way is aligned to its frame, and on the hidden peg a refit a quarter turn round
     // turned the hand on its way down to the hole. A learned actor saw objects turned about as
-    // the twin has them.
+    // the twin has them, and a round one's turn is not seen at all: a fit's would swing the
+    // sites round it (the scanned pancake's near edge, where the blade goes under).
     if (!first)
       estimates_[i].pose = estimator_.NearestLookAlike(int(i), estimates_[i].pose, believed);
-    else if (policy_)
+    else if (policy_ || estimator_.symmetry(int(i)) == 0)
       estimates_[i].pose = estimator_.NearestLookAlike(int(i), estimates_[i].pose);
     env_.PlaceBody(bodies_[i], estimates_[i].pose);
     spdlog::debug(
