@@ -132,6 +132,7 @@ struct ObjectPoseEstimator::Model {
   // over its outline then speaks against a fit (a taller box of the clutter, whose lower part it
   // explains).
   bool alone = true;
+  int on = -1;       // the object it stands on, if any
   int symmetry = 1;  // turns about z that look alike; 0: any turn (round)
   Eigen::Vector2d axis = Eigen::Vector2d::Zero();  // body frame: where a round body's axis stands
   // What a fit is chosen by: the points it explains less those inside its outline it does not,
@@ -203,9 +204,14 @@ ObjectPoseEstimator::ObjectPoseEstimator(std::shared_ptr<const sim::Task> twin,
     return at.z() > under.z_min && (at.head<2>().array() >= under.lo.array()).all() &&
            (at.head<2>().array() <= under.hi.array()).all();
   };
-  for (auto& model : models_)
-    for (const auto& other : models_)
-      if (other != model && (over(*model, *other) || over(*other, *model))) model->alone = false;
+  for (std::size_t a = 0; a < models_.size(); ++a)
+    for (std::size_t b = 0; b < models_.size(); ++b) {
+      if (a == b) continue;
+      Model& model = *models_[a];
+      const Model& other = *models_[b];
+      if (over(model, other) || over(other, model)) model.alone = false;
+      if (over(other, model) && model.on < 0) model.on = int(b);
+    }
   std::sort(object_geoms_.begin(), object_geoms_.end());
 }
 
@@ -253,6 +259,12 @@ int ObjectPoseEstimator::SeenThrough(int i, const core::Pose& pose, const Eigen:
 }
 
 int ObjectPoseEstimator::symmetry(int i) const { return models_.at(i)->symmetry; }
+
+core::Pose ObjectPoseEstimator::NominalOn(int i, const std::vector<core::Pose>& poses) const {
+  const Model& model = *models_.at(i);
+  if (model.on < 0) return model.nominal;
+  return poses.at(model.on) * models_.at(model.on)->nominal.Inverse() * model.nominal;
+}
 
 core::Pose ObjectPoseEstimator::NearestLookAlike(int i, const core::Pose& pose) const {
   return NearestLookAlike(i, pose, models_.at(i)->nominal);

@@ -169,6 +169,10 @@ class ObjectPoseEstimator {
   // where the twin has them round it, not where a fit's arbitrary turn put them.
   core::Pose NearestLookAlike(int i, const core::Pose& pose) const;
   core::Pose NearestLookAlike(int i, const core::Pose& pose, const core::Pose& reference) const;
+  // The twin's own pose of body i, carried as the object it stands on in the twin (a pancake on
+  // its griddle) stands at `poses` (one a body) against the twin's own: a round body's reference
+  // turn, where its sites lie as the twin has them round what carries it.
+  core::Pose NominalOn(int i, const std::vector<core::Pose>& poses) const;
 
  private:
   struct Model;

@@ -76,15 +76,17 @@ std::string DiscMesh(const std::string& name, double rx, double ry, double bumps
 
 // A round object's turn cannot be seen, so a fit's turn is arbitrary and the sites round it (a
 // pancake's near edge, where the blade goes under) would swing with it: the twin's own turn is
-// taken, about the object's own axis. A scanned disc is round to a few millimetres, not to the
-// 1 mm a square's quarter turns are held to; an oval dish is not round, nor a square box.
+// taken, about the object's own axis, and on what it stands on, as that was found turned. A scanned
+// disc is round to a few millimetres, not to the 1 mm a square's quarter turns are held to; an oval
+// dish is not round, nor a square box.
 TEST(PoseEstimate, ARoundObjectTakesTheTurnItIsBelievedAt) {
   const auto dir = core::testing::TestDir("pose_estimate_test", "round");
   core::WriteFileAtomic(dir / "scene.xml", "<mujoco><asset>" + DiscMesh("disc", 0.045, 0.045, 1) +
                                                DiscMesh("dish", 0.045, 0.033, 1) +
                                                R"(</asset>
   <worldbody>
-    <body name="disc" pos="0.5 -0.15 0.003" euler="0 0 0.6"><geom type="mesh" mesh="disc"/></body>
+    <body name="tray" pos="0.5 -0.15 0.005"><geom type="box" size="0.07 0.06 0.005"/></body>
+    <body name="disc" pos="0.5 -0.15 0.013" euler="0 0 0.6"><geom type="mesh" mesh="disc"/></body>
     <body name="dish" pos="0.5 0 0.003"><geom type="mesh" mesh="dish"/></body>
     <body name="box" pos="0.5 0.15 0.02"><geom type="box" size="0.02 0.02 0.02"/></body>
   </worldbody>
@@ -96,10 +98,11 @@ randomization: {distractors: {max_count: 0, count: [0, 0]}}
 camera: {position: [1.2, 0.3, 0.6], look_at: [0.55, 0.0, 0.1], fovy_deg: 45, width: 80, height: 60}
 )");
   auto task = std::make_shared<const sim::Task>(sim::LoadTaskSpec((dir / "task.yaml").string()));
-  const ObjectPoseEstimator estimator(task, {"disc", "dish", "box"});
+  const ObjectPoseEstimator estimator(task, {"disc", "dish", "box", "tray"});
   EXPECT_EQ(estimator.symmetry(0), 0) << "the bumpy disc is round";
   EXPECT_EQ(estimator.symmetry(1), 1) << "an oval dish is not";
   EXPECT_EQ(estimator.symmetry(2), 4);
+  EXPECT_EQ(estimator.symmetry(3), 2);
 
   // Fitted 1.3 rad round from the twin's own, 2 cm along: the twin's turn, about the disc's own
   // centre, which stays where the fit put it.
@@ -113,6 +116,24 @@ camera: {position: [1.2, 0.3, 0.6], look_at: [0.55, 0.0, 0.1], fovy_deg: 45, wid
   EXPECT_LT((chosen * centre - fitted * centre).norm(), 1e-3);
   EXPECT_GT((chosen.translation - fitted.translation).norm(), 1e-3)
       << "turned about its centre, not its origin";
+  // On its tray, found 0.3 rad round and 1 cm along: the disc's reference turns with the tray;
+  // what stands on nothing keeps the twin's own.
+  std::vector<core::Pose> found;
+  for (int i = 0; i < 4; ++i) found.push_back(estimator.nominal(i));
+  found[3].rotation = core::Yaw(0.3) * found[3].rotation;
+  found[3].translation.y() += 0.01;
+  const core::Pose on_tray = estimator.NominalOn(0, found);
+  EXPECT_NEAR(core::AngleBetween(on_tray.rotation, nominal.rotation), 0.3, 1e-9);
+  EXPECT_LT(
+      (on_tray.translation - found[3] * (estimator.nominal(3).Inverse() * nominal.translation))
+          .norm(),
+      1e-9);
+  EXPECT_NEAR(core::AngleBetween(estimator.NominalOn(0, found).rotation,
+                                 estimator.NearestLookAlike(0, fitted, on_tray).rotation),
+              0, 1e-9);
+  EXPECT_TRUE(estimator.NominalOn(2, found).translation.isApprox(estimator.nominal(2).translation));
+  EXPECT_TRUE(estimator.NominalOn(3, found).translation.isApprox(estimator.nominal(3).translation))
+      << "the tray stands on nothing estimated";
   // Seen again, the turn it was believed at.
   core::Pose believed = nominal;
   believed.rotation = core::Yaw(-0.4) * believed.rotation;
