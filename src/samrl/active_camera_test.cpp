@@ -219,10 +219,9 @@ TEST(ActiveCamera, NoOneViewSeesTheHiddenHoleInEveryScene) {
     for (int i = 0; i < kAzimuths; ++i) table += std::to_string(hidden[i * kElevations + j]) + " ";
     table += "\n";
   }
-  std::printf(
-      "scenes of %d where the hole is hidden, by view (rows: elevation up; columns: "
-      "azimuth):\n%s",
-      kScenes, table.c_str());
+  std::printf("scenes of %d where the hole is hidden, by view (rows: elevation up; columns: "
+              "azimuth):\n%s",
+              kScenes, table.c_str());
 }
 
 }  // namespace

@@ -335,16 +335,16 @@ double TwinActor::LookAndEstimate(const reality::Observation& o, double moved_bo
     if (shift) moved = *shift;
     refine = refine && shift.has_value();
   }
-  // After the first look, an object found less than `moved_bound` from where it was believed has
-  // not moved (that is the estimate's own scatter): it stays where it was believed or, refined,
-  // is believed where this look put it (on the hidden peg at level 2, the look from over the hole
-  // had the block over 3 mm off in 2 of 40 trials, the first estimate in 6).
   // Each object as first found, trusted or where the twin has it: a round one's turn is not seen
   // and is taken from what it stands on.
   std::vector<core::Pose> first_found;
   for (std::size_t i = 0; first && i < found.size(); ++i)
     first_found.push_back(Trusted(found[i]) ? estimator_.NearestLookAlike(int(i), found[i].pose)
                                             : estimator_.nominal(int(i)));
+  // After the first look, an object found less than `moved_bound` from where it was believed has
+  // not moved (that is the estimate's own scatter): it stays where it was believed or, refined,
+  // is believed where this look put it (on the hidden peg at level 2, the look from over the hole
+  // had the block over 3 mm off in 2 of 40 trials, the first estimate in 6).
   for (std::size_t i = 0; i < bodies_.size(); ++i) {
     if (skip[i]) continue;
     // How far it moved, between look-alike poses: a round object's fitted turn about its own axis
@@ -404,16 +404,15 @@ double TwinActor::LookAndEstimate(const reality::Observation& o, double moved_bo
     else if (policy_)
       estimates_[i].pose = estimator_.NearestLookAlike(int(i), estimates_[i].pose);
     env_.PlaceBody(bodies_[i], estimates_[i].pose);
+    const double turned = core::ToRollPitchYaw(estimates_[i].pose.rotation *
+                                               estimator_.nominal(int(i)).rotation.inverse())
+                              .z();
     spdlog::debug(
         "twin actor, look {}: {} {} at ({:.3f}, {:.3f}), {} points explained, {} not, score "
-        "{:.0f}; "
-        "believed turned {:.1f} deg from the twin's own",
+        "{:.0f}; believed turned {:.1f} deg from the twin's own",
         looks_, found[i].body, found[i].seen ? "seen" : "NOT seen", found[i].pose.translation.x(),
         found[i].pose.translation.y(), found[i].inliers, found[i].outliers, found[i].score,
-        core::ToRollPitchYaw(estimates_[i].pose.rotation *
-                             estimator_.nominal(int(i)).rotation.inverse())
-                .z() *
-            180 / M_PI);
+        turned * 180 / M_PI);
   }
   if (relook_.occluders) {
     const std::size_t before = unexplained_.size();
