@@ -33,19 +33,26 @@ bool Visible(const mjModel* m, int g) {
 constexpr double kRoundTurns[] = {30, 45, 60, 90, 120, 150};  // deg
 constexpr double kRoundTolerance = 0.1;
 
+// How far each of `mesh`'s vertices, turned by `angle` about the vertical line through `axis`
+// (its frame), lies from `surface`.
+std::vector<double> TurnedDistances(const real2sim::SurfaceQuery& surface,
+                                    const real2sim::Mesh& mesh, double angle,
+                                    const Eigen::Vector2d& axis) {
+  const Eigen::Rotation2Dd turn(angle);
+  std::vector<Eigen::Vector3d> turned;
+  for (const auto& v : mesh.vertices) {
+    const Eigen::Vector2d xy = turn * (v.head<2>() - axis) + axis;
+    turned.emplace_back(xy.x(), xy.y(), v.z());
+  }
+  return surface.Distances(turned);
+}
+
 bool Round(const real2sim::SurfaceQuery& surface, const real2sim::Mesh& mesh,
            const Eigen::Vector2d& axis) {
   double radius = 0;
   for (const auto& v : mesh.vertices) radius = std::max(radius, (v.head<2>() - axis).norm());
   for (const double deg : kRoundTurns) {
-    const core::Quat turn = core::Yaw(deg * M_PI / 180);
-    std::vector<Eigen::Vector3d> turned;
-    for (const auto& v : mesh.vertices) {
-      Eigen::Vector3d c(v.x() - axis.x(), v.y() - axis.y(), v.z());
-      c = turn * c;
-      turned.emplace_back(c.x() + axis.x(), c.y() + axis.y(), c.z());
-    }
-    std::vector<double> d = surface.Distances(turned);
+    std::vector<double> d = TurnedDistances(surface, mesh, deg * M_PI / 180, axis);
     const auto p95 = d.begin() + std::ptrdiff_t(d.size() * 95 / 100);
     std::nth_element(d.begin(), p95, d.end());
     if (*p95 > kRoundTolerance * radius) return false;
@@ -184,10 +191,8 @@ ObjectPoseEstimator::ObjectPoseEstimator(std::shared_ptr<const sim::Task> twin,
       model->symmetry = 0;
     } else {
       for (int turns : {4, 2}) {
-        const core::Quat turn = core::Yaw(2 * M_PI / turns);
-        std::vector<Eigen::Vector3d> turned;
-        for (const auto& v : mesh.vertices) turned.push_back(turn * v);
-        const std::vector<double> d = model->surface->Distances(turned);
+        const std::vector<double> d =
+            TurnedDistances(*model->surface, mesh, 2 * M_PI / turns, Eigen::Vector2d::Zero());
         if (*std::max_element(d.begin(), d.end()) < 1e-3) {
           model->symmetry = turns;
           break;
