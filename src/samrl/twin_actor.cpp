@@ -15,43 +15,6 @@
 namespace twinforge::samrl {
 namespace {
 
-// How far `point` is from geom `g` turned `rotation` about `position` (all in one frame): 0 inside
-// it. Boxes, spheres, cylinders and capsules exactly; other shapes (meshes, ellipsoids) by their
-// bounding sphere.
-double DistanceToGeom(const mjModel* m, int g, const Eigen::Matrix3d& rotation,
-                      const Eigen::Vector3d& position, const Eigen::Vector3d& point) {
-  const Eigen::Vector3d q = rotation.transpose() * (point - position);
-  const double* size = m->geom_size + 3 * g;
-  switch (m->geom_type[g]) {
-    case mjGEOM_BOX:
-      return (q.cwiseAbs() - Eigen::Map<const Eigen::Vector3d>(size)).cwiseMax(0.0).norm();
-    case mjGEOM_SPHERE:
-      return std::max(q.norm() - size[0], 0.0);
-    case mjGEOM_CYLINDER:
-      return std::hypot(std::max(q.head<2>().norm() - size[0], 0.0),
-                        std::max(std::abs(q.z()) - size[1], 0.0));
-    case mjGEOM_CAPSULE:
-      return std::max(
-          (q - Eigen::Vector3d(0, 0, std::clamp(q.z(), -size[1], size[1]))).norm() - size[0], 0.0);
-    default:
-      return std::max(q.norm() - m->geom_rbound[g], 0.0);
-  }
-}
-
-// How far `point` (world) is from the nearest of a body's geoms: 0 inside one.
-double DistanceToBody(const mjModel* m, const mjData* d, int body, const Eigen::Vector3d& point) {
-  double nearest = std::numeric_limits<double>::infinity();
-  for (int g = 0; g < m->ngeom; ++g) {
-    if (m->geom_bodyid[g] != body) continue;
-    const Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> rotation(d->geom_xmat +
-                                                                                  9 * g);
-    nearest = std::min(
-        nearest, DistanceToGeom(m, g, rotation,
-                                Eigen::Map<const Eigen::Vector3d>(d->geom_xpos + 3 * g), point));
-  }
-  return nearest;
-}
-
 // The site a step carries, when it is on `body` (-1 otherwise).
 int CarriedSiteOn(const mjModel* m, const sim::ExpertStep& step, int body) {
   const int site = step.carry.empty() ? -1 : mj_name2id(m, mjOBJ_SITE, step.carry.c_str());
@@ -148,6 +111,7 @@ TwinActor::TwinActor(std::shared_ptr<const sim::Task> twin, reality::Robot& robo
       env_(twin),
       expert_(*twin),
       estimator_(twin, twin->spec().objects, options, threads),
+      distance_(env_.model()),
       relook_(relook) {
   for (const auto& name : twin->spec().objects)
     bodies_.push_back(mj_name2id(env_.model(), mjOBJ_BODY, name.c_str()));
@@ -184,7 +148,7 @@ double TwinActor::DistanceToHand(const std::vector<PosedGeom>& hand,
   double nearest = std::numeric_limits<double>::infinity();
   for (const PosedGeom& g : hand)
     nearest =
-        std::min(nearest, DistanceToGeom(env_.model(), g.geom, g.rotation, g.position, point));
+        std::min(nearest, distance_.ToGeom(env_.model(), g.geom, g.rotation, g.position, point));
   return nearest;
 }
 
@@ -251,7 +215,7 @@ bool TwinActor::NearAnObject(const Eigen::Vector3d& point, double margin) const 
   for (std::size_t i = 0; i < bodies_.size(); ++i) {
     // A fit not to be trusted stands where something else is (a screen): that is in the way.
     if (i < estimates_.size() && int(i) != carried_ && !Trusted(estimates_[i])) continue;
-    if (DistanceToBody(env_.model(), env_.data(), bodies_[i], world) < margin) return true;
+    if (distance_.ToBody(env_.model(), env_.data(), bodies_[i], world) < margin) return true;
   }
   return false;
 }
@@ -482,10 +446,10 @@ std::vector<Eigen::Vector3d> TwinActor::PointsOnHeld(const std::vector<Eigen::Ve
   const mjModel* m = env_.model();
   std::vector<Eigen::Vector3d> on;
   for (const Eigen::Vector3d& p : seen) {
-    const double d = DistanceToBody(m, env_.data(), body, p);
+    const double d = distance_.ToBody(m, env_.data(), body, p);
     if (d >= margin) continue;
     const bool others = std::any_of(bodies_.begin(), bodies_.end(), [&](int other) {
-      return other != body && DistanceToBody(m, env_.data(), other, p) <= d;
+      return other != body && distance_.ToBody(m, env_.data(), other, p) <= d;
     });
     if (!others) on.push_back(p);
   }
@@ -594,7 +558,7 @@ reality::OperatorInput TwinActor::Next(const reality::Observation& o) {
     // it. Not the nearest body frame: a spatula's is at its middle, 7 cm from its handle.
     double nearest = 0.05;
     for (std::size_t i = 0; i < bodies_.size(); ++i) {
-      const double d = DistanceToBody(env_.model(), env_.data(), bodies_[i], tool.translation);
+      const double d = distance_.ToBody(env_.model(), env_.data(), bodies_[i], tool.translation);
       if (d < nearest) {
         nearest = d;
         carried_ = int(i);

@@ -26,6 +26,7 @@
 #include "sim/camera.h"
 #include "sim/env.h"
 #include "sim/expert.h"
+#include "sim/geom_distance.h"
 
 namespace twinforge::samrl {
 
@@ -215,6 +216,7 @@ class TwinActor : public reality::Operator {
   sim::ScriptedExpert expert_;
   learn::StateActor policy_;
   ObjectPoseEstimator estimator_;
+  sim::GeomDistance distance_;  // of points to the twin's geoms
   std::vector<int> bodies_;
   std::vector<ObjectPose> estimates_;
   // What the actor believes and holds, for the look callback.
