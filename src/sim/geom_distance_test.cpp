@@ -51,8 +51,8 @@ TEST(GeomDistance, AMeshIsAsFarAsTheBoxItsVerticesSpan) {
     return distance.ToGeom(m, disc, rotation, position, p);
   };
   // Inside, 4 cm over the middle (its bounding sphere, 5 cm round, held that too), 6 cm out
-  // along its own x (1 cm past the points on the circle) and 6 cm out across it, past a side of
-  // the box.
+  // along its own x (1 cm past the points on the circle) and 1.3 cm under the middle (1 cm under
+  // its underside).
   EXPECT_NEAR(to_disc(middle), 0.0, 1e-9);
   EXPECT_NEAR(to_disc(middle + Eigen::Vector3d(0, 0, 0.04)), 0.037, 1e-6);
   EXPECT_NEAR(to_disc(middle + 0.06 * along), 0.01, 1e-6);
