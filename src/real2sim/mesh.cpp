@@ -176,15 +176,23 @@ std::vector<double> SurfaceQuery::Distances(const std::vector<Eigen::Vector3d>& 
 }
 
 std::vector<Eigen::Vector3d> SurfaceQuery::Closest(const std::vector<Eigen::Vector3d>& points,
-                                                   int threads) const {
+                                                   int threads,
+                                                   std::vector<Eigen::Vector3d>* normals) const {
   if (impl_->empty) throw core::Error("closest points asked of a surface without triangles");
   std::vector<Eigen::Vector3d> closest;
+  if (normals) normals->clear();
   if (points.empty()) return closest;
   const auto answer = impl_->scene.ComputeClosestPoints(PointTensor(points), threads);
   const float* c = answer.at("points").GetDataPtr<float>();
   closest.reserve(points.size());
   for (std::size_t i = 0; i < points.size(); ++i)
     closest.emplace_back(c[3 * i], c[3 * i + 1], c[3 * i + 2]);
+  if (normals) {
+    const float* n = answer.at("primitive_normals").GetDataPtr<float>();
+    normals->reserve(points.size());
+    for (std::size_t i = 0; i < points.size(); ++i)
+      normals->push_back(Eigen::Vector3d(n[3 * i], n[3 * i + 1], n[3 * i + 2]).normalized());
+  }
   return closest;
 }
 

@@ -120,9 +120,10 @@ class SurfaceQuery {
   SurfaceQuery& operator=(SurfaceQuery&&) noexcept;
   // Each point's distance (m) to the triangles (infinity if there are none).
   std::vector<double> Distances(const std::vector<Eigen::Vector3d>& points, int threads = 0) const;
-  // Each point's nearest point on the triangles (the mesh must have some).
-  std::vector<Eigen::Vector3d> Closest(const std::vector<Eigen::Vector3d>& points,
-                                       int threads = 0) const;
+  // Each point's nearest point on the triangles (the mesh must have some); `normals`, if given,
+  // gets the unit normal of the triangle each lies on (its winding's side).
+  std::vector<Eigen::Vector3d> Closest(const std::vector<Eigen::Vector3d>& points, int threads = 0,
+                                       std::vector<Eigen::Vector3d>* normals = nullptr) const;
   // How far each ray, from `origins[i]` along the unit `directions[i]`, goes before it first meets
   // the triangles, from either side (infinity where it never does). Throws core::Error when the
   // counts differ.

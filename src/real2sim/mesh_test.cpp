@@ -105,6 +105,25 @@ TEST(Mesh, SurfaceDistancesAreToTheTrianglesNotToTheirCorners) {
   EXPECT_TRUE(std::isinf(SurfaceDistances({{0, 0, 0}}, Mesh{})[0]));
 }
 
+// The closest point's normal is its triangle's, on the side its winding faces: up for the square
+// wound counter-clockwise seen from above, down wound the other way; a point off its edge gets
+// the edge's triangle's normal too.
+TEST(Mesh, ClosestPointsComeWithTheirTrianglesNormals) {
+  Mesh square;
+  square.vertices = {{0, 0, 0}, {0.1, 0, 0}, {0.1, 0.1, 0}, {0, 0.1, 0}};
+  square.triangles = {{0, 1, 2}, {0, 2, 3}};
+  const std::vector<Eigen::Vector3d> points{{0.05, 0.02, 0.003}, {0.13, 0.05, 0.04}};
+  std::vector<Eigen::Vector3d> normals;
+  const auto closest = SurfaceQuery(square).Closest(points, 1, &normals);
+  ASSERT_EQ(normals.size(), 2u);
+  EXPECT_LT((closest[1] - Eigen::Vector3d(0.1, 0.05, 0)).norm(), 1e-6);
+  for (const auto& n : normals) EXPECT_LT((n - Eigen::Vector3d(0, 0, 1)).norm(), 1e-6);
+  square.triangles = {{0, 2, 1}, {0, 3, 2}};
+  SurfaceQuery(square).Closest(points, 1, &normals);
+  ASSERT_EQ(normals.size(), 2u);
+  EXPECT_LT((normals[0] - Eigen::Vector3d(0, 0, -1)).norm(), 1e-6);
+}
+
 // A ray meets the square where it crosses its plane inside it, from above or below, and along the
 // diagonal its two triangles share; one that passes beside it, or a surface without triangles,
 // never.
