@@ -205,6 +205,7 @@ TEST(PoseEstimate, SettledOnTheDarkBlockWhereItsPointsAreNearest) {
   const reality::Observation o = scene.proxy.Reset({core::MixSeed(5000, 1000 + 3), 1});
   PoseEstimateOptions unsettled;
   unsettled.settle = 0;
+  unsettled.polish = false;  // which takes two of the four within 2 mm
   ObjectPoseEstimator settling(scene.task, scene.spec.objects);
   ObjectPoseEstimator not_settling(scene.task, scene.spec.objects, unsettled);
   int off = 0;
@@ -217,7 +218,7 @@ TEST(PoseEstimate, SettledOnTheDarkBlockWhereItsPointsAreNearest) {
         << "frame " << frame;
     off += SiteError(*scene.task, not_settling.Estimate(points), hidden, "hole_top") > 0.002;
   }
-  EXPECT_GE(off, 3) << "of 4 frames, fits not settled more than 2 mm off";
+  EXPECT_GE(off, 3) << "of 4 frames, fits neither polished nor settled more than 2 mm off";
 }
 
 // The starts of a fit run on a pool; the fit is the same, bit for bit, on one thread or three
@@ -567,6 +568,45 @@ TEST(TwinActorOnReality, TheScannedTwinMeasuresTheBladeOverANearPancake) {
   sim::Env drawn(scene.task);
   ASSERT_GT(std::abs(Reach(drawn, "spatula", "spatula_grasp", "blade_tip") - real_reach), 0.008);
   EXPECT_NEAR(Reach(actor.twin(), "spatula", "spatula_grasp", "blade_tip"), real_reach, 0.004);
+}
+
+// The scanned griddle is found turned as the scene turned it, to 2 deg. Level 1 turns it up to 17
+// deg, and every failure of the scanned twin at stop 87 was a scene turned 14-17 deg. This is the
+// first level-1 scene from seed 5000 turned 0.25 rad or more (-15.5 deg), looked at once from the
+// task camera: found turned -15.6 deg. Not polished point to plane, as until stop 88, -4.2. (The
+// two scenes before it turned 0.2 rad or more, -12.8 and -13.4 deg: -12.6 and -13.1, and -3.9 and
+// -4.9 not polished; one scene is fitted in about a minute.)
+TEST(PoseEstimate, TheScannedGriddleIsFoundTurnedAsTheSceneTurnedIt) {
+  Scene scene("spatula_flipping");
+  scene.task =
+      ScannedSpatula(scene.proxy, core::testing::TestDir("twin_actor_reality", "turned_griddle"));
+  const auto& objects = scene.task->spec().objects;
+  ObjectPoseEstimator estimator(scene.task, objects);
+  const int griddle = int(std::find(objects.begin(), objects.end(), "griddle") - objects.begin());
+  const sim::Env& hidden = scene.proxy.hidden_env();
+  const int real = mj_name2id(hidden.model(), mjOBJ_BODY, "griddle");
+  scene.proxy.Reset({0, 0});
+  const core::Pose scanned = hidden.BodyPose(real);
+  const auto yaw = [](const core::Pose& p) { return core::ToRollPitchYaw(p.rotation).z(); };
+  uint64_t seed = 5000;
+  double turn = 0;
+  for (;; ++seed) {
+    ASSERT_LT(seed, 5200u);
+    scene.proxy.Reset({seed, 1});
+    turn = yaw(hidden.BodyPose(real) * scanned.Inverse());
+    if (std::abs(turn) >= 0.25) break;
+  }
+  const reality::Observation o = scene.proxy.Reset({seed, 1});
+  std::vector<Eigen::Vector3d> points;
+  for (const auto& frame : scene.TaskCameraLook()({o, {}, ""})) {
+    const auto p = estimator.Foreground(FramePoints(frame), o.q, o.gripper_width);
+    points.insert(points.end(), p.begin(), p.end());
+  }
+  const auto estimate = estimator.Estimate(points);
+  const double fitted = yaw(estimate[griddle].pose * estimator.nominal(griddle).Inverse());
+  EXPECT_LT(std::abs(std::remainder(fitted - turn, 2 * M_PI)) * 180 / M_PI, 2.0)
+      << "seed " << seed << ": turned " << turn * 180 / M_PI << " deg, fitted "
+      << fitted * 180 / M_PI;
 }
 
 // Level 3 shoves the block a few cm while the peg is on its way. Looking once, the actor puts
