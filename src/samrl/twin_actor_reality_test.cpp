@@ -575,7 +575,8 @@ TEST(TwinActorOnReality, TheScannedTwinMeasuresTheBladeOverANearPancake) {
 // first level-1 scene from seed 5000 turned 0.25 rad or more (-15.5 deg), looked at once from the
 // task camera: found turned -15.6 deg. Not polished point to plane, as until stop 88, -4.2. (The
 // two scenes before it turned 0.2 rad or more, -12.8 and -13.4 deg: -12.6 and -13.1, and -3.9 and
-// -4.9 not polished; one scene is fitted in about a minute.)
+// -4.9 not polished; one scene is fitted in about a minute. The polished turns were measured
+// before the polish was bound to 3 cm.)
 TEST(PoseEstimate, TheScannedGriddleIsFoundTurnedAsTheSceneTurnedIt) {
   Scene scene("spatula_flipping");
   scene.task =
