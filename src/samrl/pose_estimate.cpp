@@ -548,7 +548,14 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model,
     return (p.head<2>() - model.nominal.translation.head<2>()).norm() <= options_.search;
   };
   // Starts: the centroids of the points per cell of the table's grid, within the search radius,
-  // each at several yaws.
+  // each at several yaws; a round body (a pancake) at one: any turn of it is the same surface, to
+  // the tenth of its radius `symmetry` allows, and the ICP from it takes nearly the same path (its
+  // 8 yaws per cell took 15 s of a scanned spatula scene's 85 s of fitting). Not so the quarter
+  // turns of a square block: only its visible surface turns into itself. The drawn block's walls
+  // meet inside it at faces that turn with it, points near those seams pair otherwise, and with
+  // the hand over the block the starts' fits part: one start per quarter turn lost trials 4 and
+  // 16 of the hidden peg's level 3, seeds 9000.
+  const int yaw_starts = model.symmetry == 0 ? 1 : options_.yaw_starts;
   std::map<std::pair<int, int>, std::pair<Eigen::Vector3d, int>> cells;
   for (const auto& p : points) {
     if (!in_search(p)) continue;
@@ -562,17 +569,18 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model,
   for (const auto& [cell, sum_n] : cells) {
     if (sum_n.second < options_.min_cell_points) continue;
     const Eigen::Vector3d centroid = sum_n.first / sum_n.second;
-    for (int k = 0; k < options_.yaw_starts; ++k) {
+    for (int k = 0; k < yaw_starts; ++k) {
       core::Pose pose = model.nominal;
-      pose.rotation = core::Yaw(2 * M_PI * k / options_.yaw_starts) * model.nominal.rotation;
+      pose.rotation = core::Yaw(2 * M_PI * k / yaw_starts) * model.nominal.rotation;
       pose.translation.head<2>() = centroid.head<2>();
       starts.push_back(pose);
     }
   }
+  best.starts = int(starts.size());
   // The points bucketed on the table's plane, so that a pose's neighbourhood is looked for in the
   // buckets it can reach only: a point within the outline (radius r) and height range (|z| <= h)
-  // of a pose is within sqrt(r^2 + h^2) of its origin, whatever its tilt. The candidates are
-  // sorted, so `near` finds the points of a scan over all of them, in the same order.
+  // of a pose is within sqrt(r^2 + h^2) of its origin, whatever its tilt. The points `near` finds
+  // are sorted, in the order a scan over all of them would find them.
   const auto extent = [&](double margin) {
     const double h = std::max(std::abs(model.z_min - margin), std::abs(model.z_max + margin));
     return std::hypot(model.radius + margin, h);
@@ -595,21 +603,25 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model,
     return candidates;
   };
   // The points near a pose, in the body's frame: within its outline and height, with margin.
+  // Those farther from its origin than the extent cannot be (a hidden peg's block has a screen's
+  // 40-110k points in the buckets round it, of which a few hundred are near it: sorting and
+  // turning all of them took half of each fit).
   const auto near = [&](const core::Pose& pose, double margin, std::vector<Eigen::Vector3d>& local,
                         std::vector<int>& index) {
     local.clear();
     index.clear();
     const core::Pose inv = pose.Inverse();
-    std::vector<int> candidates = candidates_near(pose.translation, extent(margin));
-    std::sort(candidates.begin(), candidates.end());
-    for (const int i : candidates) {
+    const double reach = extent(margin) + 1e-9;
+    for (const int i : candidates_near(pose.translation, reach)) {
+      if ((points[i] - pose.translation).squaredNorm() > reach * reach) continue;
       const Eigen::Vector3d b = inv * points[i];
       if (b.head<2>().norm() > model.radius + margin || b.z() < model.z_min - margin ||
           b.z() > model.z_max + margin)
         continue;
-      local.push_back(b);
-      index.push_back(int(i));
+      index.push_back(i);
     }
+    std::sort(index.begin(), index.end());
+    for (const int i : index) local.push_back(inv * points[i]);
   };
   // Each start annealed on its own (spread over the pool: a start's result depends on the start
   // only, so the fit is the same whatever the thread count), then scored.
@@ -654,9 +666,9 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model,
     return result;
   };
   // The ICP from `pose`, annealed from the start reach to the last, each step point to plane or
-  // point to point.
-  const auto icp = [&](core::Pose pose, bool point_to_plane, std::vector<Eigen::Vector3d>& local,
-                       std::vector<int>& index) {
+  // point to point, on at most `most` of the points near it (0: all).
+  const auto icp = [&](core::Pose pose, bool point_to_plane, int most,
+                       std::vector<Eigen::Vector3d>& local, std::vector<int>& index) {
     std::vector<Eigen::Vector3d> normals;
     for (int it = 0; it < options_.iterations; ++it) {
       const double t = options_.iterations > 1 ? double(it) / (options_.iterations - 1) : 1.0;
@@ -664,6 +676,16 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model,
           options_.start_reach * std::pow(options_.reach / options_.start_reach, t);
       near(pose, reach, local, index);
       if (local.empty()) break;
+      if (most > 0 && local.size() > std::size_t(most)) {
+        // Every (n / most)-th, in the frame's order: spread over the object as the frame sees it.
+        const std::size_t n = local.size();
+        for (std::size_t k = 0; k < std::size_t(most); ++k) {
+          local[k] = local[k * n / most];
+          index[k] = index[k * n / most];
+        }
+        local.resize(most);
+        index.resize(most);
+      }
       const std::vector<Eigen::Vector3d> closest =
           model.surface->Closest(local, 1, point_to_plane ? &normals : nullptr);
       const auto [turn, shift] = point_to_plane
@@ -686,7 +708,7 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model,
   pool_->ParallelFor(int64_t(starts.size()), [&](int64_t start) {
     std::vector<Eigen::Vector3d> local;
     std::vector<int> index;
-    const core::Pose pose = icp(starts[start], false, local, index);
+    const core::Pose pose = icp(starts[start], false, options_.start_points, local, index);
     // A fit that ends beyond the search radius is not scored, so not taken: a start near the
     // radius's edge can slide out to a clutter box beyond it (the hidden peg's level-2 trial 5:
     // the block fitted 17 cm from the twin's, 18 cm from the real one).
@@ -704,7 +726,7 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model,
     // guard: the hidden peg's level-3 seeds 9000 took the same steps in 36 trials without it.
     std::vector<Eigen::Vector3d> local;
     std::vector<int> index;
-    const core::Pose pose = icp(result.pose, true, local, index);
+    const core::Pose pose = icp(result.pose, true, 0, local, index);
     const Eigen::Vector3d middle(0.5 * (model.lo.x() + model.hi.x()),
                                  0.5 * (model.lo.y() + model.hi.y()), 0);
     if (in_search(pose.translation) &&
@@ -758,7 +780,8 @@ std::vector<ObjectPose> ObjectPoseEstimator::Estimate(
       const auto start = std::chrono::steady_clock::now();
       ObjectPose fit = Fit(*models_[i], points);
       spdlog::debug(
-          "pose estimate: {} fitted to {} points in {:.2f} s", models_[i]->body, points.size(),
+          "pose estimate: {} fitted to {} points from {} starts in {:.2f} s", models_[i]->body,
+          points.size(), fit.starts,
           std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
       if (pick < 0 || models_[i]->Score(fit.inliers, fit.outliers, options_) >
                           models_[pick]->Score(picked.inliers, picked.outliers, options_)) {

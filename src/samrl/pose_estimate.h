@@ -55,6 +55,10 @@ struct PoseEstimateOptions {
   int min_cell_points = 5;  // of a start cell
   int yaw_starts = 8;       // over a whole turn
   int iterations = 25;
+  // Each start's ICP steps on at most this many of the points near it, spread evenly over them
+  // (0: all); the fits are scored, polished and settled on all. A scanned griddle's 464 starts
+  // stepped on about 4000 points each, 25 times: 69 s of an 85 s fit of its scene.
+  int start_points = 500;
   double start_reach = 0.03, reach = 0.006;  // m: correspondences kept, annealed from / to
   // The best start's fit ICP'd once more, point to plane, and taken if it scores better and has
   // not moved its outline's middle beyond start_reach. The starts step point to point, which on a
@@ -88,6 +92,7 @@ struct PoseEstimateOptions {
     a("min_cell_points", min_cell_points);
     a("yaw_starts", yaw_starts);
     a("iterations", iterations);
+    a("start_points", start_points);
     a("start_reach", start_reach);
     a("polish", polish);
     a("reach", reach);
@@ -100,6 +105,7 @@ struct PoseEstimateOptions {
         "reach", "positive distances, start_reach >= reach");
     a.Require(outlier_weight >= 0, "outlier_weight", "not negative");
     a.Require(settle >= 0, "settle", "not negative, in m (0: not settled)");
+    a.Require(start_points >= 0, "start_points", "not negative (0: all)");
     a.Require(yaw_starts >= 1 && iterations >= 1 && min_points >= 1, "yaw_starts",
               "at least one start, iteration and point");
   }
@@ -112,6 +118,7 @@ struct ObjectPose {
   int inliers = 0;    // points within options.inlier of the surface
   int outliers = 0;   // points inside its outline farther than options.reach
   double rms = 0;     // m, over the inliers
+  int starts = 0;     // the ICP's starts fitted (cells of points, each at its yaws)
   // The fit's score: inliers less the outliers weighed as options.outlier_weight says. Under 0,
   // more of the frame speaks against the fit than for it (an object hidden, fitted to what
   // stands in front of it).

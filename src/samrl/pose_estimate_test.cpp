@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <random>
 #include <sstream>
 #include <string>
@@ -76,12 +77,8 @@ std::string DiscMesh(const std::string& name, double rx, double ry, double bumps
          "\"/>";
 }
 
-// A round object's turn cannot be seen, so a fit's turn is arbitrary and the sites round it (a
-// pancake's near edge, where the blade goes under) would swing with it: the twin's own turn is
-// taken, about the object's own axis, and on what it stands on, as that was found turned. A scanned
-// disc is round to a few millimetres, not to the 1 mm a square's quarter turns are held to; an oval
-// dish is not round, nor a square box.
-TEST(PoseEstimate, ARoundObjectTakesTheTurnItIsBelievedAt) {
+// A bumpy disc on a tray, an oval dish and a box.
+std::shared_ptr<const sim::Task> RoundScene() {
   const auto dir = core::testing::TestDir("pose_estimate_test", "round");
   core::WriteFileAtomic(dir / "scene.xml", "<mujoco><asset>" + DiscMesh("disc", 0.045, 0.045, 1) +
                                                DiscMesh("dish", 0.045, 0.033, 1) +
@@ -99,7 +96,16 @@ success: [{type: axis_upright, body: disc, axis: [0, 0, 1], threshold: 0.9}]
 randomization: {distractors: {max_count: 0, count: [0, 0]}}
 camera: {position: [1.2, 0.3, 0.6], look_at: [0.55, 0.0, 0.1], fovy_deg: 45, width: 80, height: 60}
 )");
-  auto task = std::make_shared<const sim::Task>(sim::LoadTaskSpec((dir / "task.yaml").string()));
+  return std::make_shared<const sim::Task>(sim::LoadTaskSpec((dir / "task.yaml").string()));
+}
+
+// A round object's turn cannot be seen, so a fit's turn is arbitrary and the sites round it (a
+// pancake's near edge, where the blade goes under) would swing with it: the twin's own turn is
+// taken, about the object's own axis, and on what it stands on, as that was found turned. A scanned
+// disc is round to a few millimetres, not to the 1 mm a square's quarter turns are held to; an oval
+// dish is not round, nor a square box.
+TEST(PoseEstimate, ARoundObjectTakesTheTurnItIsBelievedAt) {
+  const auto task = RoundScene();
   const ObjectPoseEstimator estimator(task, {"disc", "dish", "box", "tray"});
   EXPECT_EQ(estimator.symmetry(0), 0) << "the bumpy disc is round";
   EXPECT_EQ(estimator.symmetry(1), 1) << "an oval dish is not";
@@ -142,6 +148,58 @@ camera: {position: [1.2, 0.3, 0.6], look_at: [0.55, 0.0, 0.1], fovy_deg: 45, wid
   EXPECT_NEAR(core::AngleBetween(estimator.NearestLookAlike(0, fitted, believed).rotation,
                                  believed.rotation),
               0, 1e-9);
+}
+
+// Points on a surface (body frame) `apart` m apart over the box [lo, hi], keeping those `keep`
+// says.
+std::vector<Eigen::Vector3d> Grid(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi,
+                                  double apart,
+                                  const std::function<bool(const Eigen::Vector3d&)>& keep) {
+  std::vector<Eigen::Vector3d> out;
+  for (double x = lo.x(); x <= hi.x() + 1e-9; x += apart)
+    for (double y = lo.y(); y <= hi.y() + 1e-9; y += apart)
+      for (double z = lo.z(); z <= hi.z() + 1e-9; z += apart)
+        if (keep({x, y, z})) out.emplace_back(x, y, z);
+  return out;
+}
+
+// A round body's starts are at one yaw per cell: any turn of it is the same surface. The bumpy
+// disc is found where it was moved to from them, as the box (turned 0.3 rad) from its eight.
+TEST(PoseEstimate, ARoundBodyIsStartedAtOneYaw) {
+  const auto task = RoundScene();
+  const Eigen::Vector3d centre(0.003, 0, 0);  // the disc's, body frame
+  // Its top and rim, 3 mm apart; the box's top and sides.
+  const auto disc = Grid({-0.045, -0.048, -0.003}, {0.051, 0.048, 0.003}, 0.003, [&](auto p) {
+    const double r = (p.template head<2>() - centre.head<2>()).norm();
+    return (p.z() > 0.0029 && r < 0.044) || (r > 0.0435 && r < 0.0465);
+  });
+  const auto box = Grid({-0.02, -0.02, -0.02}, {0.02, 0.02, 0.02}, 0.004, [](auto p) {
+    return p.z() > 0.0199 || p.cwiseAbs().template head<2>().maxCoeff() > 0.0199;
+  });
+  const auto fits = [&](int yaw_starts) {
+    PoseEstimateOptions options;
+    options.yaw_starts = yaw_starts;
+    const ObjectPoseEstimator estimator(task, {"disc", "box"}, options);
+    core::Pose disc_at = estimator.nominal(0), box_at = estimator.nominal(1);
+    disc_at.translation += Eigen::Vector3d(0.015, -0.01, 0);
+    box_at.translation += Eigen::Vector3d(-0.01, 0.012, 0);
+    box_at.rotation = core::Yaw(0.3) * box_at.rotation;
+    std::vector<Eigen::Vector3d> points;
+    for (const auto& p : disc) points.push_back(disc_at * p);
+    for (const auto& p : box) points.push_back(box_at * p);
+    const std::vector<ObjectPose> fit = estimator.Estimate(points);
+    EXPECT_TRUE(fit[0].seen && fit[1].seen);
+    EXPECT_LT((fit[0].pose * centre - disc_at * centre).head<2>().norm(), 0.0015);
+    const core::Pose box_fit = estimator.NearestLookAlike(1, fit[1].pose, box_at);
+    EXPECT_LT((box_fit.translation - box_at.translation).head<2>().norm(), 0.0015);
+    EXPECT_LT(core::AngleBetween(box_fit.rotation, box_at.rotation), 0.02);
+    return std::pair{fit[0].starts, fit[1].starts};
+  };
+  const auto [disc_8, box_8] = fits(8);
+  const auto [disc_1, box_1] = fits(1);
+  EXPECT_GT(disc_1, 0);
+  EXPECT_EQ(disc_8, disc_1) << "a round body, one yaw per cell";
+  EXPECT_EQ(box_8, 8 * box_1) << "a square box, each of its eight";
 }
 
 // Straight over the peg's block, a camera that sees the table under its walls sees through where
@@ -213,8 +271,9 @@ TEST(PoseEstimate, AFlatTopDoesNotHoldBackTheTurn) {
   face({-0.03, -0.08, 0.035}, {0.01, 0, 0}, {0, 0.16, 0}, 0.004);  // the lip's top
   face({-0.03, -0.08, 0.025}, {0, 0.16, 0}, {0, 0, 0.01}, 0.012);  // its near side
   PoseEstimateOptions options;
-  const auto found = [&](bool polish) {
+  const auto found = [&](bool polish, int start_points = PoseEstimateOptions{}.start_points) {
     options.polish = polish;
+    options.start_points = start_points;
     const ObjectPoseEstimator estimator(spatula, {"griddle"}, options);
     core::Pose moved = estimator.nominal(0);
     moved.rotation = core::Yaw(15 * M_PI / 180) * moved.rotation;
@@ -230,6 +289,10 @@ TEST(PoseEstimate, AFlatTopDoesNotHoldBackTheTurn) {
   const auto [turn, off] = found(true);
   EXPECT_NEAR(turn, 15, 1);
   EXPECT_LT(off, 0.003);
+  // The starts stepped on 500 of the points near them (of about 2700); on all of them, the same.
+  const auto [every_turn, every_off] = found(true, 0);
+  EXPECT_NEAR(turn, every_turn, 0.2);
+  EXPECT_NEAR(off, every_off, 0.0005);
   EXPECT_LT(found(false).first, 10) << "not polished, as until stop 88";
 }
 
