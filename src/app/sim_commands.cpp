@@ -10,6 +10,7 @@
 #include "core/thread_pool.h"
 #include "learn/evaluate.h"
 #include "real2sim/calibrate/sysid_bench.h"
+#include "samrl/pose_bench.h"
 #include "sim/bench.h"
 #include "sim/camera.h"
 #include "sim/expert.h"
@@ -217,12 +218,31 @@ void AddSimCommands(CLI::App& parent, int& exit_code) {
   bench->add_option("--num-envs", bench_options->num_envs, "environments in the VecEnv")
       ->check(CLI::PositiveNumber);
   auto bench_sysid = std::make_shared<bool>(false);
-  bench->add_flag("--sysid", *bench_sysid,
-                  "time sysid's replays instead: a controller fit on 1 and 2 threads, against raw "
-                  "mj_step on 1 and 2");
-  bench->callback([bench_task, bench_options, bench_sysid, &exit_code] {
+  auto* sysid_flag = bench->add_flag(
+      "--sysid", *bench_sysid,
+      "time sysid's replays instead: a controller fit on 1 and 2 threads, against raw "
+      "mj_step on 1 and 2");
+  auto bench_pose = std::make_shared<samrl::PoseBenchOptions>();
+  auto bench_pose_on = std::make_shared<bool>(false);
+  bench
+      ->add_flag("--pose", *bench_pose_on,
+                 "time the pose estimate instead: on the task camera's frame of the twin at a "
+                 "reset, against raw closest-point queries of the same points")
+      ->excludes(sysid_flag);
+  bench->add_option("--seed", bench_pose->seed, "the reset's seed (--pose)");
+  bench->add_option("--level", bench_pose->level, "the reset's level (--pose)")
+      ->check(CLI::Range(0, 3));
+  bench
+      ->add_option("--capture-scale", bench_pose->capture_scale,
+                   "the frame at this many times the task camera's resolution (--pose)")
+      ->check(CLI::Range(1, 16));
+  bench->callback([bench_task, bench_options, bench_sysid, bench_pose, bench_pose_on, &exit_code] {
     const sim::TaskSpec spec = sim::LoadTaskSpec(*bench_task);
-    if (*bench_sysid) {
+    if (*bench_pose_on) {
+      bench_pose->repeats = bench_options->repeats;
+      std::cout << samrl::RunPoseBench(std::make_shared<const sim::Task>(spec), *bench_pose).dump(2)
+                << std::endl;
+    } else if (*bench_sysid) {
       std::cout << real2sim::RunSysidBench(spec, {.repeats = bench_options->repeats}).dump(2)
                 << std::endl;
     } else {

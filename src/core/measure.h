@@ -14,6 +14,14 @@ inline double SecondsSince(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
 }
 
+// Wall-clock seconds `work()` takes.
+template <class Work>
+double Seconds(Work&& work) {
+  const auto start = Clock::now();
+  work();
+  return SecondsSince(start);
+}
+
 // The median of `values` (the upper one of an even count); 0 when empty. Benchmarks report it:
 // shared machines are noisy.
 inline double Median(std::vector<double> values) {

@@ -12,6 +12,7 @@
 #include "core/fs.h"
 #include "core/se3.h"
 #include "core/test_support.h"
+#include "samrl/pose_bench.h"
 #include "sim/task.h"
 
 namespace twinforge::samrl {
@@ -294,6 +295,28 @@ TEST(PoseEstimate, AFlatTopDoesNotHoldBackTheTurn) {
   EXPECT_NEAR(turn, every_turn, 0.2);
   EXPECT_NEAR(off, every_off, 0.0005);
   EXPECT_LT(found(false).first, 10) << "not polished, as until stop 88";
+}
+
+// `sim bench --pose`: the estimate on a frame of the peg twin, timed against raw closest-point
+// passes over the same points, both objects found where the reset put them.
+TEST(PoseBench, TimesTheEstimateAgainstRawQueriesAndReportsItsErrors) {
+  auto peg = std::make_shared<const sim::Task>(sim::LoadTaskSpec("peg_insertion"));
+  PoseBenchOptions options;
+  options.repeats = 1;
+  options.capture_scale = 4;
+  const nlohmann::json out = RunPoseBench(peg, options);
+  EXPECT_GT(out.at("foreground_points").get<int>(), 200);
+  EXPECT_GT(out.at("raw_closest_points_per_s").get<double>(), 0);
+  EXPECT_GT(out.at("estimate_in_raw_passes").get<double>(), 1) << "a fit is many passes";
+  EXPECT_GT(out.at("estimate_seconds_every_point").get<double>(), 0);
+  for (const char* body : {"peg", "hole_block"})
+    for (const char* errors : {"errors", "errors_every_point"}) {
+      const auto& e = out.at(errors).at(body);
+      EXPECT_TRUE(e.at("seen").get<bool>()) << body;
+      EXPECT_GT(e.at("starts").get<int>(), 0) << body;
+      EXPECT_LT(e.at("mm").get<double>(), 3) << body;
+      EXPECT_LT(e.at("deg").get<double>(), 3) << body;
+    }
 }
 
 }  // namespace

@@ -28,11 +28,6 @@ nlohmann::json RunSysidBench(const sim::TaskSpec& task, const SysidBenchOptions&
   // Baseline: raw mj_step on copies of the twin's model from its level-0 start.
   sim::Env start(std::make_shared<const sim::Task>(task));
   start.Reset(0, 0);
-  auto seconds = [](const std::function<void()>& work) {
-    const auto t0 = core::Clock::now();
-    work();
-    return core::SecondsSince(t0);
-  };
 
   // Each repeat measures everything back to back, so ratios compare runs seconds apart on a
   // shared, noisy machine; medians over repeats.
@@ -43,8 +38,8 @@ nlohmann::json RunSysidBench(const sim::TaskSpec& task, const SysidBenchOptions&
   for (int r = 0; r < options.repeats; ++r) {
     const sim::RawStepRates raw = sim::MeasureRawSteps(start, options.raw_steps, 7 + 2 * r);
     RobotSysidResult a, b;
-    const double t1 = seconds([&] { a = fit(1); });
-    const double t2 = seconds([&] { b = fit(2); });
+    const double t1 = core::Seconds([&] { a = fit(1); });
+    const double t2 = core::Seconds([&] { b = fit(2); });
     const RobotPhysics &x = a.identified, &y = b.identified;
     same = same && x.servo.interpolation == y.servo.interpolation &&
            x.servo.latency == y.servo.latency && x.arm.kp == y.arm.kp && x.arm.kd == y.arm.kd &&
