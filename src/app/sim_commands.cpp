@@ -236,6 +236,9 @@ void AddSimCommands(CLI::App& parent, int& exit_code) {
       ->add_option("--capture-scale", bench_pose->capture_scale,
                    "the frame at this many times the task camera's resolution (--pose)")
       ->check(CLI::Range(1, 16));
+  bench->add_flag("--from-mount", bench_pose->from_mount,
+                  "the frame from the middle of the movable camera's mount, not the task camera "
+                  "(--pose)");
   bench->callback([bench_task, bench_options, bench_sysid, bench_pose, bench_pose_on, &exit_code] {
     const sim::TaskSpec spec = sim::LoadTaskSpec(*bench_task);
     if (*bench_pose_on) {

@@ -8,6 +8,7 @@
 #include "core/measure.h"
 #include "core/thread_pool.h"
 #include "real2sim/mesh.h"
+#include "samrl/active_camera.h"
 #include "samrl/pose_estimate.h"
 #include "samrl/twin_actor.h"
 #include "sim/camera.h"
@@ -27,6 +28,11 @@ nlohmann::json RunPoseBench(std::shared_ptr<const sim::Task> twin,
   // The frame, as a robot would send it: depth in millimetres, the arm in view.
   sim::Camera camera = sim::MakeCamera(spec.camera);
   camera.intrinsics = ScaleIntrinsics(camera.intrinsics, options.capture_scale);
+  if (options.from_mount) {
+    const OrbitMount mount = ObjectsMount(*twin);
+    camera.pose = OrbitPose(mount, 0.5 * (mount.min_azimuth + mount.max_azimuth),
+                            0.5 * (mount.min_elevation + mount.max_elevation));
+  }
   sim::RayCaster caster(camera, m);
   const auto& k = camera.intrinsics;
   std::vector<float> depth(std::size_t(k.width) * k.height);
@@ -92,6 +98,7 @@ nlohmann::json RunPoseBench(std::shared_ptr<const sim::Task> twin,
     return out;
   };
   return {{"task", spec.name},
+          {"from_mount", options.from_mount},
           {"seed", options.seed},
           {"level", options.level},
           {"repeats", options.repeats},

@@ -19,6 +19,9 @@ struct PoseBenchOptions {
   uint64_t seed = 5000;
   int level = 1;          // the reset's randomization: 1 moves and turns the objects
   int capture_scale = 8;  // the frame at this many times the task camera's resolution, as eval's
+  // The frame from the middle of the movable camera's mount (ObjectsMount: the hidden peg's far
+  // side, which the task camera does not see) rather than from the task camera.
+  bool from_mount = false;
 };
 
 // Times ObjectPoseEstimator::Estimate on the frame with the default options and with every

@@ -41,6 +41,13 @@ PoseEstimateOptions ArmAlone() {
   return o;
 }
 
+// The fits not polished point to plane, as before stop 88.
+PoseEstimateOptions Unpolished() {
+  PoseEstimateOptions o;
+  o.polish = false;
+  return o;
+}
+
 struct Scene {
   explicit Scene(const std::string& name)
       : spec(sim::LoadTaskSpec(name)),
@@ -863,9 +870,7 @@ TEST(TwinActorOnReality, DoesNotFollowABlockFittedToASliver) {
     // The frame also sees through the sliver's fit (918 points; 36 where the block was believed),
     // and that check refuses it too (stop 83): off here, for the count of points alone.
     relook.seen_through_points = 0;
-    PoseEstimateOptions unpolished;
-    unpolished.polish = false;
-    const HiddenPeg::Outcome trial = peg.RunTrial(20, 3, relook, unpolished);
+    const HiddenPeg::Outcome trial = peg.RunTrial(20, 3, relook, Unpolished());
     EXPECT_EQ(trial.looks, 3) << "min points " << min_points;
     if (min_points > 100) {
       EXPECT_EQ(trial.redone, 0);
@@ -912,9 +917,7 @@ TEST(TwinActorOnReality, AFifthLookFindsTheBlockAfterAFirstLookThatMissedIt) {
   for (const int looks : {RelookOptions{}.max_looks, 4}) {
     RelookOptions relook = HiddenPeg::EvalRelook();
     relook.max_looks = looks;
-    PoseEstimateOptions unpolished;
-    unpolished.polish = false;
-    const HiddenPeg::Outcome trial = peg.RunTrial(7, 3, relook, unpolished);
+    const HiddenPeg::Outcome trial = peg.RunTrial(7, 3, relook, Unpolished());
     EXPECT_EQ(trial.looks, looks);
     if (looks > 4) {
       EXPECT_TRUE(trial.success) << "five looks";
