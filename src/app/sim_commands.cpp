@@ -224,21 +224,25 @@ void AddSimCommands(CLI::App& parent, int& exit_code) {
       "mj_step on 1 and 2");
   auto bench_pose = std::make_shared<samrl::PoseBenchOptions>();
   auto bench_pose_on = std::make_shared<bool>(false);
-  bench
-      ->add_flag("--pose", *bench_pose_on,
-                 "time the pose estimate instead: on the task camera's frame of the twin at a "
-                 "reset, against raw closest-point queries of the same points")
-      ->excludes(sysid_flag);
-  bench->add_option("--seed", bench_pose->seed, "the reset's seed (--pose)");
+  auto* pose_flag =
+      bench->add_flag("--pose", *bench_pose_on,
+                      "time the pose estimate instead: on the task camera's frame of the twin at a "
+                      "reset, against raw closest-point queries of the same points");
+  pose_flag->excludes(sysid_flag);
+  bench->add_option("--seed", bench_pose->seed, "the reset's seed (--pose)")->needs(pose_flag);
   bench->add_option("--level", bench_pose->level, "the reset's level (--pose)")
-      ->check(CLI::Range(0, 3));
+      ->check(CLI::Range(0, 3))
+      ->needs(pose_flag);
   bench
       ->add_option("--capture-scale", bench_pose->capture_scale,
                    "the frame at this many times the task camera's resolution (--pose)")
-      ->check(CLI::Range(1, 16));
-  bench->add_flag("--from-mount", bench_pose->from_mount,
-                  "the frame from the middle of the movable camera's mount, not the task camera "
-                  "(--pose)");
+      ->check(CLI::Range(1, 16))
+      ->needs(pose_flag);
+  bench
+      ->add_flag("--from-mount", bench_pose->from_mount,
+                 "the frame from the middle of the movable camera's mount, not the task camera "
+                 "(--pose)")
+      ->needs(pose_flag);
   bench->callback([bench_task, bench_options, bench_sysid, bench_pose, bench_pose_on, &exit_code] {
     const sim::TaskSpec spec = sim::LoadTaskSpec(*bench_task);
     if (*bench_pose_on) {

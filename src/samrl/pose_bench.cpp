@@ -51,7 +51,9 @@ nlohmann::json RunPoseBench(std::shared_ptr<const sim::Task> twin,
   const ObjectPoseEstimator exhaustive(twin, spec.objects, every_point);
   const std::vector<Eigen::Vector3d> foreground =
       estimator.Foreground(FramePoints(frame), env.ArmPositions(), 2 * env.FingerOpening());
-  if (foreground.empty()) throw core::Error("pose bench: the task camera sees no object");
+  if (foreground.empty())
+    throw core::Error("pose bench: task " + spec.name +
+                      ": the frame shows nothing the twin's fixed geometry and arm do not explain");
 
   // The baseline: the foreground's closest points on the objects' surfaces, in one query.
   std::vector<int> ids;

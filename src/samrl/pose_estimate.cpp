@@ -603,9 +603,9 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model,
     return candidates;
   };
   // The points near a pose, in the body's frame: within its outline and height, with margin.
-  // Those farther from its origin than the extent cannot be (a hidden peg's block has a screen's
-  // 40-110k points in the buckets round it, of which a few hundred are near it: sorting and
-  // turning all of them took half of each fit).
+  // Those farther from its origin than the extent cannot be, and are dropped before they are
+  // turned or sorted: a hidden peg's block has a screen's 40-110k points in the buckets round it,
+  // a few hundred of them near it (sorting and turning them all took about half of an eval's time).
   const auto near = [&](const core::Pose& pose, double margin, std::vector<Eigen::Vector3d>& local,
                         std::vector<int>& index) {
     local.clear();
