@@ -8,6 +8,7 @@
 #include "core/measure.h"
 #include "core/thread_pool.h"
 #include "real2sim/mesh.h"
+#include "reality/proxy_reality.h"
 #include "samrl/active_camera.h"
 #include "samrl/pose_estimate.h"
 #include "samrl/twin_actor.h"
@@ -21,36 +22,27 @@ nlohmann::json RunPoseBench(std::shared_ptr<const sim::Task> twin,
                             const PoseBenchOptions& options) {
   const sim::TaskSpec& spec = twin->spec();
   if (spec.objects.empty()) throw core::Error("pose bench: task " + spec.name + " has no objects");
-  sim::Env env(twin);
-  env.Reset(options.seed, options.level);
+  // The twin run as a robot with an ideal depth sensor (ProxyReality::SimulatedTwin): its frame
+  // as a robot would send it, the arm in view.
+  const auto robot = reality::ProxyReality::SimulatedTwin(spec);
+  const reality::Observation o = robot->Reset({options.seed, options.level});
+  const sim::Env& env = robot->hidden_env();
   const mjModel* m = env.model();
-
-  // The frame, as a robot would send it: depth in millimetres, the arm in view.
   sim::Camera camera = sim::MakeCamera(spec.camera);
-  camera.intrinsics = ScaleIntrinsics(camera.intrinsics, options.capture_scale);
   if (options.from_mount) {
     const OrbitMount mount = ObjectsMount(*twin);
     camera.pose = OrbitPose(mount, 0.5 * (mount.min_azimuth + mount.max_azimuth),
                             0.5 * (mount.min_elevation + mount.max_elevation));
   }
-  sim::RayCaster caster(camera, m);
-  const auto& k = camera.intrinsics;
-  std::vector<float> depth(std::size_t(k.width) * k.height);
-  caster.Render(m, env.data(), env.base(), depth.data(), nullptr, true);
-  reality::RgbdFrame frame;
-  frame.camera = "task";
-  frame.intrinsics = k;
-  frame.extrinsics = camera.pose;
-  frame.depth.resize(depth.size());
-  for (std::size_t i = 0; i < depth.size(); ++i)
-    frame.depth[i] = uint16_t(std::lround(std::min(depth[i], 60.0f) * 1e3));
+  const reality::RgbdFrame frame =
+      robot->Capture({camera.pose, ScaleIntrinsics(camera.intrinsics, options.capture_scale)});
 
   PoseEstimateOptions every_point;
   every_point.start_points = 0;
   ObjectPoseEstimator estimator(twin, spec.objects);
   const ObjectPoseEstimator exhaustive(twin, spec.objects, every_point);
   const std::vector<Eigen::Vector3d> foreground =
-      estimator.Foreground(FramePoints(frame), env.ArmPositions(), 2 * env.FingerOpening());
+      estimator.Foreground(FramePoints(frame), o.q, o.gripper_width);
   if (foreground.empty())
     throw core::Error("pose bench: task " + spec.name +
                       ": the frame shows nothing the twin's fixed geometry and arm do not explain");

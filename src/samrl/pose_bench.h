@@ -1,9 +1,9 @@
 // The pose estimate's cost, measured against a baseline taken in the same process: raw
 // closest-point queries (Open3D's, on one thread) of the same frame's foreground on the estimated
 // objects' surfaces, the query each of the fit's ICP steps and scores makes. The frame is the
-// task camera's depth at the resolution eval captures, ray-cast from the twin itself at a level's
-// reset (no noise), so the objects' poses are known and the fits' errors are reported beside their
-// times.
+// task camera's at the resolution eval captures, from the twin run as a robot at a level's reset
+// (ProxyReality::SimulatedTwin: an ideal depth sensor), so the objects' poses are known and the
+// fits' errors are reported beside their times.
 #pragma once
 
 #include <cstdint>
