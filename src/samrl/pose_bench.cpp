@@ -52,9 +52,7 @@ nlohmann::json RunPoseBench(std::shared_ptr<const sim::Task> twin,
   for (const auto& body : spec.objects) ids.push_back(mj_name2id(m, mjOBJ_BODY, body.c_str()));
   const real2sim::SurfaceQuery objects(real2sim::PosedGeoms(m, env.data(), env.base(), [&](int g) {
     for (const int id : ids)
-      if (sim::InSubtree(m, m->geom_bodyid[g], id) && sim::GeomRgba(m, g)[3] > 0 &&
-          m->geom_group[g] <= 2)
-        return true;
+      if (sim::InSubtree(m, m->geom_bodyid[g], id) && sim::GeomShown(m, g)) return true;
     return false;
   }));
 

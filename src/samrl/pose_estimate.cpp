@@ -20,11 +20,6 @@ namespace twinforge::samrl {
 
 namespace {
 
-// A geom the twin shows (as the calibration's renderer takes them).
-bool Visible(const mjModel* m, int g) {
-  return sim::GeomRgba(m, g)[3] > 0 && m->geom_group[g] <= 2;
-}
-
 // A shape is round when it looks the same turned any way about the vertical line through `axis`
 // (its frame): turned by each of kRoundTurns, 95% of its vertices lie within kRoundTolerance of
 // its radius from its surface. Scanned discs are round to this, not to the 1 mm the look-alike
@@ -263,7 +258,7 @@ ObjectPoseEstimator::ObjectPoseEstimator(std::shared_ptr<const sim::Task> twin,
     if (model->id < 0) throw core::Error(twin_->spec().name + ": the twin has no body " + name);
     model->nominal = env_.BodyPose(model->id);
     const auto mine = [&](int g) {
-      return sim::InSubtree(m, m->geom_bodyid[g], model->id) && Visible(m, g);
+      return sim::InSubtree(m, m->geom_bodyid[g], model->id) && sim::GeomShown(m, g);
     };
     for (int g = 0; g < m->ngeom; ++g)
       if (mine(g)) object_geoms_.push_back(g);
@@ -417,7 +412,7 @@ std::vector<Eigen::Vector3d> ObjectPoseEstimator::Foreground(
   // it after.
   if (held >= 0) env_.PlaceBody(models_[held]->id, held_pose);
   const real2sim::Mesh background = real2sim::PosedGeoms(m, env_.data(), env_.base(), [&](int g) {
-    return Visible(m, g) &&
+    return sim::GeomShown(m, g) &&
            (!std::binary_search(object_geoms_.begin(), object_geoms_.end(), g) ||
             (held >= 0 && sim::InSubtree(m, m->geom_bodyid[g], models_[held]->id)));
   });
@@ -428,9 +423,9 @@ std::vector<Eigen::Vector3d> ObjectPoseEstimator::Foreground(
       return sim::InSubtree(m, m->geom_bodyid[g], models_[held]->id);
     };
     held_mesh = real2sim::PosedGeoms(m, env_.data(), env_.base(),
-                                     [&](int g) { return Visible(m, g) && in_held(g); });
+                                     [&](int g) { return sim::GeomShown(m, g) && in_held(g); });
     rest = real2sim::PosedGeoms(m, env_.data(), env_.base(), [&](int g) {
-      return Visible(m, g) && !in_held(g) &&
+      return sim::GeomShown(m, g) && !in_held(g) &&
              !std::binary_search(object_geoms_.begin(), object_geoms_.end(), g);
     });
   }
@@ -439,9 +434,11 @@ std::vector<Eigen::Vector3d> ObjectPoseEstimator::Foreground(
   if (options_.register_reach > 0) {
     const real2sim::Mesh target =
         options_.register_to_robot
-            ? real2sim::PosedGeoms(
-                  m, env_.data(), env_.base(),
-                  [&](int g) { return Visible(m, g) && m->geom_group[g] == sim::kRobotGeomGroup; })
+            ? real2sim::PosedGeoms(m, env_.data(), env_.base(),
+                                   [&](int g) {
+                                     return sim::GeomShown(m, g) &&
+                                            m->geom_group[g] == sim::kRobotGeomGroup;
+                                   })
             : background;
     // Only points near the surface can pair with it: the ICP looks up the nearest surface sample
     // of every point it is given at every iteration, and most of a frame is far from the arm.

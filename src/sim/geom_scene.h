@@ -53,6 +53,12 @@ inline const float* GeomRgba(const mjModel* m, int g) {
   return mat >= 0 ? m->mat_rgba + 4 * mat : m->geom_rgba + 4 * g;
 }
 
+// A geom the twin shows, as the calibration's renderer and the pose estimate take it: not fully
+// transparent, and in groups 0-2 (a scanned twin's collision boxes and the distractors are in 3).
+inline bool GeomShown(const mjModel* m, int g) {
+  return GeomRgba(m, g)[3] > 0 && m->geom_group[g] <= 2;
+}
+
 // Triangles of one geom in its own frame: xyz per vertex, three vertex indices per triangle.
 struct TriangleMesh {
   std::vector<float> vertices;

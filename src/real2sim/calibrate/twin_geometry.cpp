@@ -16,7 +16,7 @@ TwinGeometry::TwinGeometry(const sim::TaskSpec& spec, int mesh_triangles)
     : task_(std::make_shared<const sim::Task>(spec)), env_(task_) {
   const mjModel* m = env_.model();
   for (int g = 0; g < m->ngeom; ++g) {
-    if (sim::GeomRgba(m, g)[3] <= 0 || m->geom_group[g] > 2) continue;
+    if (!sim::GeomShown(m, g)) continue;
     const sim::TriangleMesh t = sim::TessellateGeom(m, g);
     if (t.triangles.empty()) continue;
     Mesh mesh;
