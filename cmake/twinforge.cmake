@@ -39,12 +39,17 @@ function(twinforge_test file)
   target_compile_definitions(${target} PRIVATE
     TWINFORGE_TEST_DATA_DIR="${TWINFORGE_SOURCE_DIR}/tests/fixtures")
   include(GoogleTest)
+  # One OpenMP thread per test, as the CLI's start-up pins its main thread (learn::PinMathThreads):
+  # ctest runs tests side by side, and Open3D's TSDF integration in a scan test spun on every core.
+  # libgomp reads the variable when it loads, so it is set here, not by the test.
+  set(env ENVIRONMENT OMP_NUM_THREADS=1)
   if(ARG_LABELS)
     # Discovery writes a list property unquoted (LABELS a b: b is read as another property), so
     # a file with labels of its own has its tests listed from the source at configure time.
     gtest_add_tests(TARGET ${target} SOURCES ${file} TEST_LIST tests)
-    set_tests_properties(${tests} PROPERTIES LABELS "${module};${ARG_LABELS}" ${cost})
+    set_tests_properties(${tests} PROPERTIES LABELS "${module};${ARG_LABELS}" ${cost} ${env})
   else()
-    gtest_discover_tests(${target} PROPERTIES LABELS "${module}" ${cost} DISCOVERY_TIMEOUT 60)
+    gtest_discover_tests(${target} PROPERTIES LABELS "${module}" ${cost} ${env}
+                       DISCOVERY_TIMEOUT 60)
   endif()
 endfunction()
