@@ -102,7 +102,7 @@ void TwinActorCli::Add(CLI::App* c) {
        "--seen-through-points", relook.seen_through_points,
        "twin actor: a later look's fit that moves an object is ignored when its frame "
        "sees through where the fit would put it (the table where a block would stand) at "
-       "this many points or more (in a 640x480 frame), and where it was believed at fewer; "
+       "this many points or more (in a 640x480 frame), and more than where it was believed; "
        "0: not checked")
       ->check(CLI::NonNegativeNumber);
   c->add_option("--max-move", relook.max_move,

@@ -291,6 +291,7 @@ double TwinActor::LookAndEstimate(const reality::Observation& o, double moved_bo
   const bool first = estimates_.empty();
   if (first) estimates_ = found;
   double moved = 0;
+  belief_seen_through_ = false;
   if (measure_held) {
     // The held object first. Not found in the hand, the others are not refined either: the one
     // refined alone against the other as an earlier frame had it was the worse (on the hidden
@@ -341,11 +342,22 @@ double TwinActor::LookAndEstimate(const reality::Observation& o, double moved_bo
       const int there = seen_through(int(i), found[i].pose);
       const int believed = seen_through(int(i), estimates_[i].pose);
       const double enough = scaled(relook_.seen_through_points);
-      const bool refused = there >= enough && believed < enough;
+      // Where the frames see through both places, the object stands in neither; the one they see
+      // through less is taken as the nearer. In all six such moves of stop 89's hidden-peg runs
+      // (four seed sets, level 3) the fit lay 4-33 mm farther than the belief from where the block
+      // ended the trial. The belief is wrong too, so the step is done again and the actor looks
+      // again, as following the fit had it do: refused with no look after, two of those trials
+      // that the next look had won were lost (stop 90).
+      const bool refused = there >= enough && there > believed;
+      const bool neither = refused && believed >= enough;
       spdlog::log(refused ? spdlog::level::info : spdlog::level::debug,
                   "twin actor: look {} fitted {} {:.0f} mm away; the frames see through it there "
                   "at {} points, where it was believed at {}{}",
-                  looks_, found[i].body, 1e3 * d, there, believed, refused ? "; ignored" : "");
+                  looks_, found[i].body, 1e3 * d, there, believed,
+                  neither   ? "; ignored, and looking again"
+                  : refused ? "; ignored"
+                            : "");
+      belief_seen_through_ = belief_seen_through_ || neither;
       if (refused) continue;
     }
     if (!again || d >= moved_bound) moved = std::max(moved, d);
@@ -519,9 +531,14 @@ reality::OperatorInput TwinActor::Next(const reality::Observation& o) {
   // Look again; if an object moved (by `bound` or more) under step `s`, do it again.
   const auto look_again = [&](int s, double bound, bool blocked) {
     const double moved = LookAndEstimate(o, bound, blocked);
-    if (moved < bound) return;
-    spdlog::info("twin actor: look {} found an object {:.0f} mm from where it was; step {} again",
-                 looks_, 1e3 * moved, s);
+    if (moved >= bound)
+      spdlog::info("twin actor: look {} found an object {:.0f} mm from where it was; step {} again",
+                   looks_, 1e3 * moved, s);
+    else if (belief_seen_through_)
+      spdlog::info("twin actor: look {} saw through where an object was believed; step {} again",
+                   looks_, s);
+    else
+      return;
     ++redone_;
     expert_.Restart(s);
     input.action = expert_.Act(env_, rng_);

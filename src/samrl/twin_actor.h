@@ -133,14 +133,16 @@ struct RelookOptions {
   bool hand_clearance = true;
   // A later look's fit that moves an object is not followed when the look's frames saw through
   // where it would put the object at this many points or more (in a 640x480 frame; as many for
-  // the frame's pixels), and through where it was believed at fewer: points that lie farther
-  // along their rays than the object's surface would be (the table where a block would stand),
-  // which the fit's score, reading the foreground only, never sees. On the hidden peg at level 3
-  // (seeds 7000, trial 18) the look from over the hole, seeing one face of the block, slid its fit
-  // 43 mm along it: 1512 points seen through it there, 10 where it was believed. Of the other 66
-  // moves found on seeds 5000 and 7000, 64 had 2-95 points through the new pose (and 23-1242
-  // through the old); two had 757 and 933, and 515 and 251 through the old: the block was in
-  // neither place, and the next look found it (stop 83). 0: not checked.
+  // the frame's pixels), and through where it was believed at fewer than there: points that lie
+  // farther along their rays than the object's surface would be (the table where a block would
+  // stand), which the fit's score, reading the foreground only, never sees. On the hidden peg at
+  // level 3 (seeds 7000, trial 18) the look from over the hole, seeing one face of the block, slid
+  // its fit 43 mm along it: 1512 points seen through it there, 10 where it was believed. Of the
+  // other 66 moves found on seeds 5000 and 7000, 64 had 2-95 points through the new pose (and
+  // 23-1242 through the old); two had 757 and 933, and 515 and 251 through the old: the block was
+  // in neither place, and the next look found it (stop 83). Since stop 90, where the frames see
+  // through both places, a fit seen through more than the belief is not followed either, and the
+  // step is done again for another look (twin_actor.cpp says why). 0: not checked.
   int seen_through_points = 100;
   template <class A>
   void Serialize(A& a) {
@@ -270,6 +272,8 @@ class TwinActor : public reality::Operator {
   RelookOptions relook_;
   core::Rng rng_{0};
   int looks_ = 0, redone_ = 0;
+  // The last look refused a fit seen through, and saw through where the object was believed too.
+  bool belief_seen_through_ = false;
   // What the last action was chosen from (features()), kept as it is sent.
   void RecordFeatures();
   std::vector<float> features_;

@@ -915,6 +915,29 @@ TEST(TwinActorOnReality, DoesNotFollowAFitTheFrameSeesThrough) {
   }
 }
 
+// In eval's level-3 trial 35 on the hidden peg (seeds 9000) the look from over the hole fits the
+// block 35 mm away. The frames see through that place (1712 points) and through where the block
+// was believed (218): it is in neither. The fit is not followed, the step over the hole is done
+// again and the actor looks again; the fifth look finds the block, and the peg goes in. Unchecked
+// (as stop 89 followed such a fit), the block was believed 35 mm off and the trial was lost.
+TEST(TwinActorOnReality, LooksAgainWhenTheFramesSeeThroughTheFitAndTheBelief) {
+  learn::PinMathThreads(1);
+  HiddenPeg peg(9000);
+  for (const int points : {RelookOptions{}.seen_through_points, 0}) {
+    RelookOptions relook = HiddenPeg::EvalRelook();
+    relook.seen_through_points = points;
+    const HiddenPeg::Outcome trial = peg.RunTrial(35, 3, relook);
+    if (points > 0) {
+      EXPECT_EQ(trial.looks, 5);
+      EXPECT_LT(trial.hole_error, 0.005);
+      EXPECT_TRUE(trial.success) << "looked again, and found the block";
+    } else {
+      EXPECT_GT(trial.hole_error, 0.02);
+      EXPECT_FALSE(trial.success) << "the block believed where the frames see through it";
+    }
+  }
+}
+
 // In eval's level-3 trial 7 on the hidden peg (seeds 9000) the first look does not see the block
 // and the actor looks again at once; the look from over the hole and the one when blocked find it
 // shoved 32 mm, the peg comes over it again and is blocked again. The fifth look finds the block
