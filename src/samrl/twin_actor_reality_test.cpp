@@ -919,7 +919,8 @@ TEST(TwinActorOnReality, DoesNotFollowAFitTheFrameSeesThrough) {
 // block 35 mm away. The frames see through that place (1712 points) and through where the block
 // was believed (218): it is in neither. The fit is not followed, the step over the hole is done
 // again and the actor looks again; the fifth look finds the block, and the peg goes in. Unchecked
-// (as stop 89 followed such a fit), the block was believed 35 mm off and the trial was lost.
+// (stop 89 followed such a fit), the block is believed where that fit put it, about 5 cm from
+// where it stands, and the trial is lost.
 TEST(TwinActorOnReality, LooksAgainWhenTheFramesSeeThroughTheFitAndTheBelief) {
   learn::PinMathThreads(1);
   HiddenPeg peg(9000);
