@@ -242,7 +242,8 @@ LookContext TwinActor::Context(const reality::Observation& o) const {
   return context;
 }
 
-double TwinActor::LookAndEstimate(const reality::Observation& o, double moved_bound, bool blocked) {
+TwinActor::LookOutcome TwinActor::LookAndEstimate(const reality::Observation& o, double moved_bound,
+                                                  bool blocked) {
   const LookContext context = Context(o);
   const core::Pose held = carried_ >= 0 ? env_.BodyPose(bodies_[carried_]) : core::Pose{};
   // Blocked, the held object stands on another: their points mix, and the look is for a push.
@@ -291,7 +292,7 @@ double TwinActor::LookAndEstimate(const reality::Observation& o, double moved_bo
   const bool first = estimates_.empty();
   if (first) estimates_ = found;
   double moved = 0;
-  belief_seen_through_ = false;
+  bool belief_seen_through = false;
   if (measure_held) {
     // The held object first. Not found in the hand, the others are not refined either: the one
     // refined alone against the other as an earlier frame had it was the worse (on the hidden
@@ -357,7 +358,7 @@ double TwinActor::LookAndEstimate(const reality::Observation& o, double moved_bo
                   neither   ? "; ignored, and looking again"
                   : refused ? "; ignored"
                             : "");
-      belief_seen_through_ = belief_seen_through_ || neither;
+      belief_seen_through = belief_seen_through || neither;
       if (refused) continue;
     }
     if (!again || d >= moved_bound) moved = std::max(moved, d);
@@ -400,7 +401,7 @@ double TwinActor::LookAndEstimate(const reality::Observation& o, double moved_bo
     spdlog::debug("twin actor, look {}: {} points no object explains", looks_,
                   unexplained_.size() - before);
   }
-  return moved;
+  return {moved, belief_seen_through};
 }
 
 void TwinActor::MeasureReach(const reality::Observation& o) {
@@ -530,11 +531,11 @@ reality::OperatorInput TwinActor::Next(const reality::Observation& o) {
   input.action = expert_.Act(env_, rng_);
   // Look again; if an object moved (by `bound` or more) under step `s`, do it again.
   const auto look_again = [&](int s, double bound, bool blocked) {
-    const double moved = LookAndEstimate(o, bound, blocked);
-    if (moved >= bound)
+    const LookOutcome look = LookAndEstimate(o, bound, blocked);
+    if (look.moved >= bound)
       spdlog::info("twin actor: look {} found an object {:.0f} mm from where it was; step {} again",
-                   looks_, 1e3 * moved, s);
-    else if (belief_seen_through_)
+                   looks_, 1e3 * look.moved, s);
+    else if (look.belief_seen_through)
       spdlog::info("twin actor: look {} saw through where an object was believed; step {} again",
                    looks_, s);
     else

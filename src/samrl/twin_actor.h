@@ -228,8 +228,14 @@ class TwinActor : public reality::Operator {
   // options refine (not when `blocked`: the look when the carried site is blocked on the way
   // down), and the held object is measured in the hand if they say so (not when blocked either).
   // Returns the largest distance (table plane) an object seen was found from where it was
-  // believed, of those `moved_bound` or more, and the held object's shift.
-  double LookAndEstimate(const reality::Observation& o, double moved_bound, bool blocked = false);
+  // believed, of those `moved_bound` or more, and the held object's shift; and whether a fit was
+  // refused as seen through where the frames saw through the belief as well.
+  struct LookOutcome {
+    double moved = 0;
+    bool belief_seen_through = false;
+  };
+  LookOutcome LookAndEstimate(const reality::Observation& o, double moved_bound,
+                              bool blocked = false);
   // Whether a fit is one to act on: seen by RelookOptions::min_points points at least (as many
   // for the last look's pixels), and with more of the frame for it than against it.
   bool Trusted(const ObjectPose& e) const;
@@ -272,8 +278,6 @@ class TwinActor : public reality::Operator {
   RelookOptions relook_;
   core::Rng rng_{0};
   int looks_ = 0, redone_ = 0;
-  // The last look refused a fit seen through, and saw through where the object was believed too.
-  bool belief_seen_through_ = false;
   // What the last action was chosen from (features()), kept as it is sent.
   void RecordFeatures();
   std::vector<float> features_;
