@@ -341,10 +341,10 @@ Action ScriptedExpert::HoldStill(const Env& env) const {
 Action ScriptedExpert::Toward(const Env& env, const core::Pose& target, double closure) {
   const auto& limits = task_.spec().control.limits;
   const core::Pose ee = env.EePose();
-  const Eigen::Matrix3d to_tool = ee.rotation.toRotationMatrix().transpose();
-  const Eigen::Vector3d dp = to_tool * (target.translation - ee.translation);
-  const Eigen::Vector3d dr = to_tool * core::LogMap(target.rotation * ee.rotation.conjugate());
   if (task_.spec().control.action == ActionMode::kDiscrete) {
+    const Eigen::Matrix3d to_tool = ee.rotation.toRotationMatrix().transpose();
+    const Eigen::Vector3d dp = to_tool * (target.translation - ee.translation);
+    const Eigen::Vector3d dr = to_tool * core::LogMap(target.rotation * ee.rotation.conjugate());
     // Gripper first; then the move that most reduces the error, measured in steps (a 3 cm move
     // and a 0.2 rad turn count the same). None helping means the target is as close as the
     // move grid allows: the caller moves on.
@@ -379,6 +379,14 @@ Action ScriptedExpert::Toward(const Env& env, const core::Pose& target, double c
     return Action::Discrete(best);
   }
   const double speed = task_.spec().expert.steps[step_].speed;
+  return ContinuousToward(ee, target, limits, speed, closure);
+}
+
+Action ContinuousToward(const core::Pose& tool, const core::Pose& target,
+                        const ActionLimits& limits, double speed, double closure) {
+  const Eigen::Matrix3d to_tool = tool.rotation.toRotationMatrix().transpose();
+  const Eigen::Vector3d dp = to_tool * (target.translation - tool.translation);
+  const Eigen::Vector3d dr = to_tool * core::LogMap(target.rotation * tool.rotation.conjugate());
   const double step_length = speed > 0 ? std::min(speed, limits.translation) : limits.translation;
   Action a = Action::Continuous({});
   for (int k = 0; k < 3; ++k) {

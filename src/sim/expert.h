@@ -134,6 +134,12 @@ class ScriptedExpert {
 // is kept. The expert's own noise, and the noise injected into its actions to teach a learner.
 Action PerturbAction(Action action, const ActionLimits& limits, double noise, core::Rng& rng);
 
+// The continuous action that brings `tool` toward `target` (robot base frame): the move and the
+// turn in the tool's frame, each component clipped to the step limits (the move to `speed` m if
+// that is positive and less), with the gripper asked to `closure` (1: closed).
+Action ContinuousToward(const core::Pose& tool, const core::Pose& target,
+                        const ActionLimits& limits, double speed, double closure);
+
 // Discrete actions, at the limit of the move grid: the first move of the best short sequence
 // (turns and moves) toward `goal`, given in the tool frame; -1 when staying put is best.
 int RefiningMove(const core::Pose& goal, const ActionLimits& limits);
