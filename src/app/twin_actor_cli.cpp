@@ -105,6 +105,12 @@ void TwinActorCli::Add(CLI::App* c) {
        "this many points or more (in a 640x480 frame), and more than where it was believed; "
        "0: not checked")
       ->check(CLI::NonNegativeNumber);
+  c->add_option("--look-aside", relook.look_aside,
+                "twin actor: m; at the look when blocked, first take the held object this far up "
+                "and toward the robot, out of the views of what it stands on, look from there "
+                "and come back (once a trial; continuous tasks; default 0.08; 0: look where "
+                "blocked)")
+      ->check(CLI::NonNegativeNumber);
   c->add_option("--max-move", relook.max_move,
                 "twin actor: m beyond which an object found is taken for a misfit (clutter taken "
                 "for it), not a push, and ignored")
@@ -193,6 +199,7 @@ TwinActorOnRobot::TwinActorOnRobot(reality::Robot& robot, const sim::TaskSpec& t
   header_["min_points"] = relook.min_points;
   header_["hand_clearance"] = relook.hand_clearance;
   header_["seen_through_points"] = relook.seen_through_points;
+  header_["look_aside"] = relook.look_aside;
   header_["capture"] = {capture.width, capture.height};
 }
 

@@ -241,6 +241,7 @@ SensingQTrainReport TrainSensingQ(const sim::TaskSpec& twin, const SensingQTrain
   const nlohmann::json header = {{"actor", "twin"},
                                  {"look", "a random view on the mount at each look"},
                                  {"max_looks", options.max_looks},
+                                 {"look_aside", samrl::RelookOptions{}.look_aside},
                                  {"twin_hash", twin_hash},
                                  {"mount", MountJson(mount)},
                                  {"capture_scale", options.capture_scale}};

@@ -175,6 +175,12 @@ int TwinActor::feature_dim() const {
   return env_.state_dim() + int(task_->spec().expert.steps.size());
 }
 
+// Toward the place aside, the hand keeping the turn it has.
+sim::Action TwinActor::Aside(const core::Pose& tool) const {
+  return sim::ContinuousToward(tool, {aside_, tool.rotation}, task_->spec().control.limits, 0,
+                               closure_);
+}
+
 void TwinActor::RecordFeatures() {
   features_.assign(feature_dim(), 0.0f);
   env_.State(features_.data());
@@ -200,6 +206,8 @@ void TwinActor::Begin(uint64_t seed) {
   closure_ = 0;
   carried_ = -1;
   reach_measured_ = false;
+  aside_resume_ = -1;
+  looked_aside_ = false;
   unexplained_.clear();
   unexplained_hand_.clear();
 }
@@ -526,6 +534,25 @@ reality::OperatorInput TwinActor::Next(const reality::Observation& o) {
     return input;
   }
   input.kind = reality::OperatorInput::Kind::kAction;
+  // On the way aside (RelookOptions::look_aside): there or out of steps, look, and come back.
+  if (aside_resume_ >= 0) {
+    constexpr int kAsideSteps = 6;
+    if ((tool.translation - aside_).norm() > 0.015 && aside_steps_ < kAsideSteps) {
+      ++aside_steps_;
+      input.action = Aside(tool);
+      RecordFeatures();
+      return input;
+    }
+    const LookOutcome look = LookAndEstimate(o, relook_.moved_when_blocked);
+    spdlog::info("twin actor: look {} from aside found {}; step {} again", looks_,
+                 look.moved >= relook_.moved_when_blocked
+                     ? fmt::format("an object {:.0f} mm from where it was", 1e3 * look.moved)
+                     : std::string("nothing moved"),
+                 aside_resume_);
+    if (look.moved >= relook_.moved_when_blocked || look.belief_seen_through) ++redone_;
+    expert_.Restart(aside_resume_);
+    aside_resume_ = -1;
+  }
   const int step = expert_.current_step();
   const bool was_searching = expert_.searching();
   input.action = expert_.Act(env_, rng_);
@@ -556,7 +583,21 @@ reality::OperatorInput TwinActor::Next(const reality::Observation& o) {
       looks_ < relook_.max_looks) {
     int s = expert_.current_step();
     while (s >= 0 && !steps[s].look) --s;
-    if (s >= 0) look_again(s, relook_.moved_when_blocked, true);
+    if (s >= 0 && relook_.look_aside > 0 && !looked_aside_ && !policy_ &&
+        task_->spec().control.action == sim::ActionMode::kContinuous) {
+      // Over the block, the hand hides it from nearly every view: look from aside first.
+      looked_aside_ = true;
+      aside_resume_ = s;
+      aside_steps_ = 1;
+      aside_ = tool.translation;
+      aside_.head<2>() -= relook_.look_aside * tool.translation.head<2>().normalized();
+      aside_.z() += relook_.look_aside;
+      spdlog::info("twin actor: blocked; looking from {:.0f} mm up and back",
+                   1e3 * relook_.look_aside);
+      input.action = Aside(tool);
+    } else if (s >= 0) {
+      look_again(s, relook_.moved_when_blocked, true);
+    }
   }
   // The first step that carried a site on the held object just done: look at it in the hand.
   if (relook_.measure_reach && !reach_measured_ && carried_ >= 0)

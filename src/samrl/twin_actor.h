@@ -144,6 +144,15 @@ struct RelookOptions {
   // through both places, a fit seen through more than the belief is not followed either, and the
   // step is done again for another look (twin_actor.cpp says why). 0: not checked.
   int seen_through_points = 100;
+  // m: at the look when blocked, first take the held object this far up and as far toward the
+  // robot's base (in the table's plane), look from there, and then do the last step marked `look`
+  // again. Once a trial, continuous tasks only. Over the block the hand hides it from nearly every
+  // view: on the hidden peg at level 3 (four seed sets, stop 90) the block filled a median 0.33%
+  // of the view the look when blocked chose, under 1% in 30 of 38 looks, and the trials it did not
+  // save were lost with the block shoved beyond the search by feel. From 8 cm up and back the looks
+  // saw a median 2.4%, and level 3 went from 150 to 158 of 160 (9 won, 1 lost; stop 91). 0: look
+  // where the site was blocked.
+  double look_aside = 0.08;
   template <class A>
   void Serialize(A& a) {
     a("max_looks", max_looks);
@@ -159,6 +168,8 @@ struct RelookOptions {
     a("min_points", min_points);
     a("hand_clearance", hand_clearance);
     a("seen_through_points", seen_through_points);
+    a("look_aside", look_aside);
+    a.Require(look_aside >= 0, "look_aside", "not negative, in m (0: off)");
     a.Require(min_points >= 1, "min_points", "at least one point");
     a.Require(max_looks >= 1, "max_looks", "at least the first look");
     a.Require(seen_through_points >= 0, "seen_through_points", "not negative (0: not checked)");
@@ -265,6 +276,14 @@ class TwinActor : public reality::Operator {
   // the object's (it then stays as it was).
   std::optional<double> MeasureHeld(const std::vector<Eigen::Vector3d>& seen);
   bool reach_measured_ = false;  // this trial
+  // RelookOptions::look_aside: where the tool takes the held object (base frame), the control
+  // steps spent on the way, the step marked `look` to do again after the look (-1: not on the
+  // way), and whether this trial has looked aside.
+  Eigen::Vector3d aside_;
+  int aside_steps_ = 0, aside_resume_ = -1;
+  bool looked_aside_ = false;
+  // The action toward `aside_` from `tool`.
+  sim::Action Aside(const core::Pose& tool) const;
   // This trial's points that no object explained when they were seen (base frame): clutter, or
   // fixed geometry the twin has elsewhere. Those that the current beliefs still leave unexplained
   // are the looks' occluders.
