@@ -177,7 +177,7 @@ int TwinActor::feature_dim() const {
 
 // Toward the place aside, the hand keeping the turn it has.
 sim::Action TwinActor::Aside(const core::Pose& tool) const {
-  return sim::ContinuousToward(tool, {aside_, tool.rotation}, task_->spec().control.limits, 0,
+  return sim::ContinuousToward(tool, {aside_.to, tool.rotation}, task_->spec().control.limits, 0,
                                closure_);
 }
 
@@ -206,8 +206,7 @@ void TwinActor::Begin(uint64_t seed) {
   closure_ = 0;
   carried_ = -1;
   reach_measured_ = false;
-  aside_resume_ = -1;
-  looked_aside_ = false;
+  aside_ = {};
   unexplained_.clear();
   unexplained_hand_.clear();
 }
@@ -535,10 +534,10 @@ reality::OperatorInput TwinActor::Next(const reality::Observation& o) {
   }
   input.kind = reality::OperatorInput::Kind::kAction;
   // On the way aside (RelookOptions::look_aside): there or out of steps, look, and come back.
-  if (aside_resume_ >= 0) {
+  if (aside_.resume >= 0) {
     constexpr int kAsideSteps = 6;
-    if ((tool.translation - aside_).norm() > 0.015 && aside_steps_ < kAsideSteps) {
-      ++aside_steps_;
+    if ((tool.translation - aside_.to).norm() > 0.015 && aside_.steps < kAsideSteps) {
+      ++aside_.steps;
       input.action = Aside(tool);
       RecordFeatures();
       return input;
@@ -548,10 +547,10 @@ reality::OperatorInput TwinActor::Next(const reality::Observation& o) {
                  look.moved >= relook_.moved_when_blocked
                      ? fmt::format("an object {:.0f} mm from where it was", 1e3 * look.moved)
                      : std::string("nothing moved"),
-                 aside_resume_);
+                 aside_.resume);
     if (look.moved >= relook_.moved_when_blocked || look.belief_seen_through) ++redone_;
-    expert_.Restart(aside_resume_);
-    aside_resume_ = -1;
+    expert_.Restart(aside_.resume);
+    aside_.resume = -1;
   }
   const int step = expert_.current_step();
   const bool was_searching = expert_.searching();
@@ -583,15 +582,12 @@ reality::OperatorInput TwinActor::Next(const reality::Observation& o) {
       looks_ < relook_.max_looks) {
     int s = expert_.current_step();
     while (s >= 0 && !steps[s].look) --s;
-    if (s >= 0 && relook_.look_aside > 0 && !looked_aside_ && !policy_ &&
+    if (s >= 0 && relook_.look_aside > 0 && !aside_.made && !policy_ &&
         task_->spec().control.action == sim::ActionMode::kContinuous) {
       // Over the block, the hand hides it from nearly every view: look from aside first.
-      looked_aside_ = true;
-      aside_resume_ = s;
-      aside_steps_ = 1;
-      aside_ = tool.translation;
-      aside_.head<2>() -= relook_.look_aside * tool.translation.head<2>().normalized();
-      aside_.z() += relook_.look_aside;
+      aside_ = {tool.translation, 1, s, true};
+      aside_.to.head<2>() -= relook_.look_aside * tool.translation.head<2>().normalized();
+      aside_.to.z() += relook_.look_aside;
       spdlog::info("twin actor: blocked; looking from {:.0f} mm up and back",
                    1e3 * relook_.look_aside);
       input.action = Aside(tool);

@@ -276,13 +276,16 @@ class TwinActor : public reality::Operator {
   // the object's (it then stays as it was).
   std::optional<double> MeasureHeld(const std::vector<Eigen::Vector3d>& seen);
   bool reach_measured_ = false;  // this trial
-  // RelookOptions::look_aside: where the tool takes the held object (base frame), the control
-  // steps spent on the way, the step marked `look` to do again after the look (-1: not on the
-  // way), and whether this trial has looked aside.
-  Eigen::Vector3d aside_;
-  int aside_steps_ = 0, aside_resume_ = -1;
-  bool looked_aside_ = false;
-  // The action toward `aside_` from `tool`.
+  // This trial's trip aside (RelookOptions::look_aside): where the tool takes the held object
+  // (base frame), the control steps spent on the way, the step marked `look` to do again after the
+  // look (-1: not on the way), and whether the trial has made it.
+  struct AsideTrip {
+    Eigen::Vector3d to = Eigen::Vector3d::Zero();
+    int steps = 0, resume = -1;
+    bool made = false;
+  };
+  AsideTrip aside_;
+  // The action toward `aside_.to` from `tool`.
   sim::Action Aside(const core::Pose& tool) const;
   // This trial's points that no object explained when they were seen (base frame): clutter, or
   // fixed geometry the twin has elsewhere. Those that the current beliefs still leave unexplained
