@@ -66,6 +66,11 @@ void AddEval(CLI::App& parent, int& exit_code) {
       "success from the robot's oracle or asked of you, 95% intervals; every trial logged (JSON "
       "report)");
   cli->reality.Add(c);
+  c->get_option("--reality")
+      ->description(
+          "tcp://host:port of a robot (bridge protocol), proxy:WORLD to start a proxy-reality "
+          "world, or twin: the --task's own twin simulated as a robot (its scene and controller, "
+          "an ideal depth sensor), to compare the same trials in the twin and on reality");
   c->add_option("--policy", cli->policy, "point-cloud policy (train bc / train distill)")
       ->check(CLI::ExistingFile);
   c->add_option(
@@ -98,10 +103,13 @@ void AddEval(CLI::App& parent, int& exit_code) {
     const std::string proxy = "proxy:";
     std::unique_ptr<reality::ProxyReality> world;
     std::unique_ptr<reality::RealityConnection> connection;
-    if (cli->grader_state) {
+    if (cli->reality.address == "twin") {
+      world = reality::ProxyReality::SimulatedTwin(task);
+      if (cli->grader_state) cli->options.grader = [w = world.get()] { return w->GraderState(); };
+    } else if (cli->grader_state) {
       if (cli->reality.address.rfind(proxy, 0) != 0)
         throw core::Error(
-            "eval --grader-state: --reality must be proxy:WORLD (a real robot's "
+            "eval --grader-state: --reality must be proxy:WORLD or twin (a real robot's "
             "scene has no hidden state to read), got " +
             cli->reality.address);
       world = std::make_unique<reality::ProxyReality>(
@@ -313,7 +321,8 @@ void AddTrainSamrl(CLI::App& train, int& exit_code) {
       ->required();
   c->add_option("--episodes", o.episodes, "simulated episodes")->check(CLI::Range(4, 100000));
   c->add_option("--max-looks", o.max_looks,
-                "looks per episode at most, each from a random view (1: look once)")
+                "looks per episode at most, each from a random view (1: look once; default " +
+                    std::to_string(o.max_looks) + ", eval's)")
       ->check(CLI::Range(1, 10));
   c->add_flag("--view-only{false}", o.plan,
               "Q reads the view alone, not the actor's plan (its next step) with it");
