@@ -105,7 +105,6 @@ void AddEval(CLI::App& parent, int& exit_code) {
     std::unique_ptr<reality::RealityConnection> connection;
     if (cli->reality.address == "twin") {
       world = reality::ProxyReality::SimulatedTwin(task);
-      if (cli->grader_state) cli->options.grader = [w = world.get()] { return w->GraderState(); };
     } else if (cli->grader_state) {
       if (cli->reality.address.rfind(proxy, 0) != 0)
         throw core::Error(
@@ -114,10 +113,11 @@ void AddEval(CLI::App& parent, int& exit_code) {
             cli->reality.address);
       world = std::make_unique<reality::ProxyReality>(
           reality::ResolveWorldDir(cli->reality.address.substr(proxy.size())));
-      cli->options.grader = [w = world.get()] { return w->GraderState(); };
     } else {
       connection = std::make_unique<reality::RealityConnection>(cli->reality.Options());
     }
+    // A world in this process (the proxy's or the simulated twin) has its hidden state to read.
+    if (cli->grader_state) cli->options.grader = [w = world.get()] { return w->GraderState(); };
     reality::Robot& robot = world ? static_cast<reality::Robot&>(*world) : connection->robot();
     core::Progress progress("eval", int64_t(cli->levels.size()) * cli->options.trials, "trials");
     const pipeline::SuccessJudge judge =
