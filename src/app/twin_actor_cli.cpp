@@ -51,6 +51,14 @@ void TwinActorCli::Add(CLI::App* c) {
                 "twin actor: m; each object's fit is settled where the squared distances of its "
                 "points to it, each capped at this, are least (0: the ICP's fit as it stops)")
       ->check(CLI::NonNegativeNumber);
+  c->add_option("--turn-margin", turn_margin,
+                "twin actor: an object seen again is fitted also at the quarter turn of its fit "
+                "nearest where it was believed, and that turn is taken if it scores within this "
+                "fraction of the fit's explained points (a scanned block's turns, which its fused "
+                "mesh's bumps tell apart only by chance; a drawn mug turned from a seen handle "
+                "scores 1.8 under); 0: the fit's own turn (before stop 93)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   c->add_option("--max-looks", relook.max_looks,
                 "twin actor: looks per trial at most, the first included; the task's expert steps "
                 "marked look are done again when a look finds an object moved (1: look once)")
@@ -172,6 +180,7 @@ TwinActorOnRobot::TwinActorOnRobot(reality::Robot& robot, const sim::TaskSpec& t
   estimate.register_tops = cli.register_to == "robot-and-table";
   estimate.register_min_hold = cli.register_min_hold;
   estimate.settle = cli.settle;
+  estimate.turn_margin = cli.turn_margin;
   actor_ = std::make_unique<samrl::TwinActor>(twin_, robot, look_, robot.Info().has_success_oracle,
                                               estimate, core::Pose{}, relook);
   identity_ = {{"actor", "twin"}, {"twin_hash", pipeline::TwinFingerprint(task)}};
@@ -184,6 +193,7 @@ TwinActorOnRobot::TwinActorOnRobot(reality::Robot& robot, const sim::TaskSpec& t
   header_["look"] = cli.look;
   if (q_.net) header_["q_hash"] = q_.hash;
   header_["settle"] = cli.settle;
+  header_["turn_margin"] = cli.turn_margin;
   header_["register_to"] = cli.register_to;
   header_["register_min_hold"] = cli.register_min_hold;
   header_["max_looks"] = relook.max_looks;

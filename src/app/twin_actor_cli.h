@@ -24,7 +24,8 @@ struct TwinActorCli {
   std::string q;             // --look q: the sensing-aware Q (train samrl's q.pt)
   std::string actor_policy;  // the twin actor acts with this state policy (train imitate's)
   int capture_scale = 8;
-  double settle = samrl::PoseEstimateOptions{}.settle;  // m: each fit settled (0: not)
+  double settle = samrl::PoseEstimateOptions{}.settle;            // m: each fit settled (0: not)
+  double turn_margin = samrl::PoseEstimateOptions{}.turn_margin;  // of the fit's points (0: not)
   samrl::RelookOptions relook;
   CLI::Option *measure_held = nullptr, *refine = nullptr;  // given on the command line or not
 
@@ -35,8 +36,8 @@ struct TwinActorCli {
   samrl::RelookOptions Relook() const;
 
   // --actor, --actor-policy, --look, --q, --register-to, --register-min-hold, --capture-scale,
-  // --settle, --max-looks, --moved, --look-when-blocked, --moved-when-blocked, --look-when-unseen,
-  // --measure-held, --refine, --occluders, --max-move.
+  // --settle, --turn-margin, --max-looks, --moved, --look-when-blocked, --moved-when-blocked,
+  // --look-when-unseen, --measure-held, --refine, --occluders, --max-move.
   void Add(CLI::App* command);
   // Throws when the options disagree, with each other or with `policy` (the --policy file:
   // needed by --actor policy, refused by --actor twin; --q goes with --look q); `command` names

@@ -534,8 +534,8 @@ std::vector<Eigen::Vector3d> ObjectPoseEstimator::Foreground(
   return out;
 }
 
-ObjectPose ObjectPoseEstimator::Fit(const Model& model,
-                                    const std::vector<Eigen::Vector3d>& points) const {
+ObjectPose ObjectPoseEstimator::Fit(const Model& model, const std::vector<Eigen::Vector3d>& points,
+                                    const core::Pose* reference) const {
   ObjectPose best;
   best.body = model.body;
   best.pose = model.nominal;
@@ -716,31 +716,66 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model,
   for (const Result& result : results)
     if (result.scored && (!chosen || better(result, *chosen))) chosen = &result;
   if (!chosen) return best;
-  Result result = *chosen;
-  if (options_.polish) {
-    // Taken if it scores better where the fit was: its outline's middle moved by no more than
-    // the ICP's first reach. Farther it is another place, which is for the starts to find. A
-    // guard: the hidden peg's level-3 seeds 9000 took the same steps in 36 trials without it.
+  const Eigen::Vector3d middle(0.5 * (model.lo.x() + model.hi.x()),
+                               0.5 * (model.lo.y() + model.hi.y()), 0);
+  // A fit polished and settled where it stands.
+  const auto finish = [&](Result result) {
     std::vector<Eigen::Vector3d> local;
     std::vector<int> index;
-    const core::Pose pose = icp(result.pose, true, 0, local, index);
-    const Eigen::Vector3d middle(0.5 * (model.lo.x() + model.hi.x()),
-                                 0.5 * (model.lo.y() + model.hi.y()), 0);
-    if (in_search(pose.translation) &&
-        (pose * middle - result.pose * middle).head<2>().norm() <= options_.start_reach) {
-      const Result polished = score(pose, local, index);
-      if (polished.scored && better(polished, result)) result = polished;
+    if (options_.polish) {
+      // Taken if it scores better where the fit was: its outline's middle moved by no more than
+      // the ICP's first reach. Farther it is another place, which is for the starts to find. A
+      // guard: the hidden peg's level-3 seeds 9000 took the same steps in 36 trials without it.
+      const core::Pose pose = icp(result.pose, true, 0, local, index);
+      if (in_search(pose.translation) &&
+          (pose * middle - result.pose * middle).head<2>().norm() <= options_.start_reach) {
+        const Result polished = score(pose, local, index);
+        if (polished.scored && better(polished, result)) result = polished;
+      }
     }
-  }
-  if (options_.settle > 0) {
-    // Settled among the points it pairs with (within the ICP's last reach: not the clutter or the
-    // hand near it, which a settle would be drawn to), then scored again where it settles.
-    std::vector<Eigen::Vector3d> local, paired;
-    std::vector<int> index;
-    score(result.pose, local, index, &paired);
-    if (!paired.empty())
-      result = score(Settle(*model.surface, paired, result.pose, options_.settle, options_.reach),
-                     local, index);
+    if (options_.settle > 0) {
+      // Settled among the points it pairs with (within the ICP's last reach: not the clutter or
+      // the hand near it, which a settle would be drawn to), then scored again where it settles.
+      std::vector<Eigen::Vector3d> paired;
+      score(result.pose, local, index, &paired);
+      if (!paired.empty())
+        result = score(Settle(*model.surface, paired, result.pose, options_.settle, options_.reach),
+                       local, index);
+    }
+    return result;
+  };
+  Result result = finish(*chosen);
+  if (reference && model.symmetry == 1 && options_.turn_margin > 0) {
+    // The fit turned about its outline's middle by the quarter turn that brings it nearest the
+    // reference: a fused mesh's bumps, not the object, may be what told the fit's turn.
+    int quarters = 0;
+    double nearest = core::AngleBetween(result.pose.rotation, reference->rotation);
+    for (int k = 1; k < 4; ++k) {
+      const double angle =
+          core::AngleBetween(result.pose.rotation * core::Yaw(M_PI / 2 * k), reference->rotation);
+      if (angle < nearest) {
+        nearest = angle;
+        quarters = k;
+      }
+    }
+    if (quarters > 0) {
+      core::Pose turned = result.pose;
+      turned.rotation = result.pose.rotation * core::Yaw(M_PI / 2 * quarters);
+      turned.translation += result.pose * middle - turned * middle;
+      std::vector<Eigen::Vector3d> local;
+      std::vector<int> index;
+      const Result alike = finish(score(turned, local, index));
+      const double fit_score = model.Score(result.inliers, result.outliers, options_);
+      const double alike_score = model.Score(alike.inliers, alike.outliers, options_);
+      const bool taken =
+          alike.scored && alike_score >= fit_score - options_.turn_margin * result.inliers;
+      spdlog::debug(
+          "pose estimate: {} fitted {} quarter turn(s) from where it was believed, score {:.0f} "
+          "({} explained, {} against); turned back, {:.0f} ({}, {}){}",
+          model.body, quarters, fit_score, result.inliers, result.outliers, alike_score,
+          alike.inliers, alike.outliers, taken ? ": taken" : ": not taken");
+      if (taken) result = alike;
+    }
   }
   best.pose = result.pose;
   best.inliers = result.inliers;
@@ -753,9 +788,13 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model,
 }
 
 std::vector<ObjectPose> ObjectPoseEstimator::Estimate(
-    const std::vector<Eigen::Vector3d>& foreground, const std::vector<bool>& skip) const {
+    const std::vector<Eigen::Vector3d>& foreground, const std::vector<bool>& skip,
+    const std::vector<std::optional<core::Pose>>& references) const {
   if (!skip.empty() && skip.size() != models_.size())
     throw core::Error("pose estimate: " + std::to_string(skip.size()) + " skip flags for " +
+                      std::to_string(models_.size()) + " bodies");
+  if (!references.empty() && references.size() != models_.size())
+    throw core::Error("pose estimate: " + std::to_string(references.size()) + " references for " +
                       std::to_string(models_.size()) + " bodies");
   std::vector<ObjectPose> out(models_.size());
   std::vector<bool> done(models_.size(), false);
@@ -775,7 +814,8 @@ std::vector<ObjectPose> ObjectPoseEstimator::Estimate(
     for (std::size_t i = 0; i < models_.size(); ++i) {
       if (done[i]) continue;
       const auto start = std::chrono::steady_clock::now();
-      ObjectPose fit = Fit(*models_[i], points);
+      ObjectPose fit = Fit(*models_[i], points,
+                           i < references.size() && references[i] ? &*references[i] : nullptr);
       spdlog::debug(
           "pose estimate: {} fitted to {} points from {} starts in {:.2f} s", models_[i]->body,
           points.size(), fit.starts,
