@@ -85,9 +85,10 @@ struct PoseEstimateOptions {
   // this fraction of the fit's explained points under the fit's (0: not tried), for a body not
   // found the same turned (`symmetry` 1). A scanned block's fused mesh has bumps a quarter turn
   // does not map onto themselves, so a fit's turn follows them and the sites on it (a hole) jump
-  // from look to look: on the scanned occluded peg's block the turn nearest the belief scored
-  // -0.15 to 0.24 under the fit's (153 later looks), where the drawn mug turned from a handle in
-  // view scores 1.8 under. The margin is about twice the block's worst.
+  // from look to look: on the scanned occluded peg's block, at the 153 later looks that fitted it
+  // a quarter or half turn from the belief, the turn nearest the belief scored -0.15 to 0.24
+  // under the fit's, where the drawn mug turned from a handle in view scores 1.8 under. The
+  // margin is about twice the block's worst.
   double turn_margin = 0.5;
   template <class A>
   void Serialize(A& a) {
