@@ -42,6 +42,24 @@ std::vector<double> TurnedDistances(const real2sim::SurfaceQuery& surface,
   return surface.Distances(turned);
 }
 
+// The angle of k of `turns` equal turns (rad).
+double TurnAngle(int k, int turns) { return 2 * M_PI * k / turns; }
+
+// Of `rotation` turned about its own z by each of `turns` equal turns (0 to turns - 1), the one
+// whose turn lies nearest `reference`; the first of equals.
+int NearestTurn(const core::Quat& rotation, const core::Quat& reference, int turns) {
+  int nearest = 0;
+  double least = core::AngleBetween(rotation, reference);
+  for (int k = 1; k < turns; ++k) {
+    const double angle = core::AngleBetween(rotation * core::Yaw(TurnAngle(k, turns)), reference);
+    if (angle < least) {
+      least = angle;
+      nearest = k;
+    }
+  }
+  return nearest;
+}
+
 bool Round(const real2sim::SurfaceQuery& surface, const real2sim::Mesh& mesh,
            const Eigen::Vector2d& axis) {
   double radius = 0;
@@ -373,16 +391,10 @@ core::Pose ObjectPoseEstimator::NearestLookAlike(int i, const core::Pose& pose,
     return turned;
   }
   core::Pose best = pose;
-  double nearest = core::AngleBetween(pose.rotation, reference.rotation);
-  for (int k = 1; k < model.symmetry; ++k) {
-    core::Pose turned = pose;
-    turned.rotation = pose.rotation * core::Yaw(2 * M_PI * k / model.symmetry);
-    const double angle = core::AngleBetween(turned.rotation, reference.rotation);
-    if (angle < nearest) {
-      nearest = angle;
-      best = turned;
-    }
-  }
+  best.rotation =
+      pose.rotation *
+      core::Yaw(TurnAngle(NearestTurn(pose.rotation, reference.rotation, model.symmetry),
+                          model.symmetry));
   return best;
 }
 
@@ -748,19 +760,10 @@ ObjectPose ObjectPoseEstimator::Fit(const Model& model, const std::vector<Eigen:
   if (reference && model.symmetry == 1 && options_.turn_margin > 0) {
     // The fit turned about its outline's middle by the quarter turn that brings it nearest the
     // reference: a fused mesh's bumps, not the object, may be what told the fit's turn.
-    int quarters = 0;
-    double nearest = core::AngleBetween(result.pose.rotation, reference->rotation);
-    for (int k = 1; k < 4; ++k) {
-      const double angle =
-          core::AngleBetween(result.pose.rotation * core::Yaw(M_PI / 2 * k), reference->rotation);
-      if (angle < nearest) {
-        nearest = angle;
-        quarters = k;
-      }
-    }
+    const int quarters = NearestTurn(result.pose.rotation, reference->rotation, 4);
     if (quarters > 0) {
       core::Pose turned = result.pose;
-      turned.rotation = result.pose.rotation * core::Yaw(M_PI / 2 * quarters);
+      turned.rotation = result.pose.rotation * core::Yaw(TurnAngle(quarters, 4));
       turned.translation += result.pose * middle - turned * middle;
       std::vector<Eigen::Vector3d> local;
       std::vector<int> index;
