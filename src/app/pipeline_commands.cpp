@@ -326,11 +326,21 @@ void AddTrainSamrl(CLI::App& train, int& exit_code) {
       ->check(CLI::Range(1, 10));
   c->add_flag("--view-only{false}", o.plan,
               "Q reads the view alone, not the actor's plan (its next step) with it");
+  using Return = pipeline::SensingQTrainOptions::Return;
   c->add_option_function<std::string>(
-       "--return", [&o](const std::string& r) { o.closeness = r == "closeness"; },
-       "what Q predicts: success (1 or 0) or closeness (how near the twin came to success, "
-       "1 on success; default success)")
-      ->check(CLI::IsMember({"success", "closeness"}));
+       "--return",
+       [&o](const std::string& r) {
+         o.ret = r == "closeness" ? Return::kCloseness
+                 : r == "look"    ? Return::kLook
+                                  : Return::kSuccess;
+       },
+       "what Q predicts: success (1 or 0), closeness (how near the twin came to success, 1 on "
+       "success) or look (the share of the objects not held that the actor believed within "
+       "--look-tolerance of where they stood once it had looked; default success)")
+      ->check(CLI::IsMember({"success", "closeness", "look"}));
+  c->add_option("--look-tolerance", o.look_tolerance,
+                "m, in the table's plane: a belief this near counts as found (--return look)")
+      ->check(CLI::PositiveNumber);
   c->add_option("--level", o.level, "the twin's randomization level")->check(CLI::Range(0, 3));
   c->add_option("--seed", o.seed, "episode seeds (and Q's initial weights)");
   c->add_option("--workers", o.workers, "threads running episodes (the episodes do not change)")

@@ -40,6 +40,8 @@ class EpisodeViews {
   core::Rng rng_;
 };
 
+using NamedPoses = std::vector<std::pair<std::string, core::Pose>>;
+
 // One look of an episode: where it looked from and what the actor believed and planned then, the
 // line a worker's looks.<worker>.jsonl holds for it.
 struct LookRecord {
@@ -48,19 +50,38 @@ struct LookRecord {
   double azimuth = 0, elevation = 0;
   std::array<double, 7> q{};
   double gripper_width = 0;
-  std::vector<std::pair<std::string, core::Pose>> objects;
+  NamedPoses objects;
   std::string held;
   int step = 0, steps = 1;
   // What the trial's earlier frames showed in the way (LookContext::occluders): Q is fitted to the
   // view the actor would render with them, as an active look renders it.
   std::vector<samrl::Occluder> occluders;
+  // Where the objects stood in the twin when it looked, and where the actor believed them once it
+  // had (--return look). Looks written before stop 94 have neither.
+  NamedPoses truth, after;
 };
 
+nlohmann::json PosesJson(const NamedPoses& poses) {
+  nlohmann::json out = nlohmann::json::object();
+  for (const auto& [name, p] : poses)
+    out[name] = {p.translation.x(), p.translation.y(), p.translation.z(), p.rotation.w(),
+                 p.rotation.x(),    p.rotation.y(),    p.rotation.z()};
+  return out;
+}
+
+NamedPoses PosesFromJson(const nlohmann::json& j) {
+  NamedPoses poses;
+  for (const auto& [name, v] : j.items()) {
+    const auto x = v.get<std::array<double, 7>>();
+    core::Pose p;
+    p.translation = {x[0], x[1], x[2]};
+    p.rotation = core::Quat(x[3], x[4], x[5], x[6]).normalized();
+    poses.emplace_back(name, p);
+  }
+  return poses;
+}
+
 nlohmann::json LookJson(const LookRecord& r) {
-  nlohmann::json objects = nlohmann::json::object();
-  for (const auto& [name, p] : r.objects)
-    objects[name] = {p.translation.x(), p.translation.y(), p.translation.z(), p.rotation.w(),
-                     p.rotation.x(),    p.rotation.y(),    p.rotation.z()};
   nlohmann::json occluders = nlohmann::json::array();
   for (const samrl::Occluder& o : r.occluders)
     occluders.push_back(
@@ -71,11 +92,13 @@ nlohmann::json LookJson(const LookRecord& r) {
           {"elevation", r.elevation},
           {"q", r.q},
           {"gripper_width", r.gripper_width},
-          {"objects", objects},
+          {"objects", PosesJson(r.objects)},
           {"held", r.held},
           {"step", r.step},
           {"steps", r.steps},
-          {"occluders", occluders}};
+          {"occluders", occluders},
+          {"truth", PosesJson(r.truth)},
+          {"after", PosesJson(r.after)}};
 }
 
 LookRecord LookFromJson(const nlohmann::json& j) {
@@ -86,13 +109,7 @@ LookRecord LookFromJson(const nlohmann::json& j) {
   r.elevation = j.at("elevation").get<double>();
   r.q = j.at("q").get<std::array<double, 7>>();
   r.gripper_width = j.at("gripper_width").get<double>();
-  for (const auto& [name, v] : j.at("objects").items()) {
-    const auto x = v.get<std::array<double, 7>>();
-    core::Pose p;
-    p.translation = {x[0], x[1], x[2]};
-    p.rotation = core::Quat(x[3], x[4], x[5], x[6]).normalized();
-    r.objects.emplace_back(name, p);
-  }
+  r.objects = PosesFromJson(j.at("objects"));
   r.held = j.at("held").get<std::string>();
   r.step = j.at("step").get<int>();
   r.steps = j.at("steps").get<int>();
@@ -102,18 +119,56 @@ LookRecord LookFromJson(const nlohmann::json& j) {
       const auto x = v.get<std::array<double, 6>>();
       r.occluders.push_back({{x[0], x[1], x[2]}, {x[3], x[4], x[5]}});
     }
+  if (j.contains("truth")) r.truth = PosesFromJson(j.at("truth"));
+  if (j.contains("after")) r.after = PosesFromJson(j.at("after"));
   return r;
 }
 
 // The return Q is fitted to for one episode: its success, or how near the twin came to it.
-double EpisodeReturn(const TrialRecord& t, bool closeness, const std::filesystem::path& dir) {
-  if (!closeness) return t.success ? 1.0 : 0.0;
+double EpisodeReturn(const TrialRecord& t, SensingQTrainOptions::Return ret,
+                     const std::filesystem::path& dir) {
+  if (ret != SensingQTrainOptions::Return::kCloseness) return t.success ? 1.0 : 0.0;
   const auto c = t.grader.is_object() ? t.grader.find("success_closeness") : t.grader.end();
   if (c == t.grader.end() || !c->is_number())
     throw core::ConfigError(dir.string() + ", episode " + std::to_string(t.trial), "grader",
                             "no success_closeness for --return closeness (a run written before "
                             "it was logged: use a fresh directory)");
   return c->get<double>();
+}
+
+// A look's own return: the share of the objects not held that the actor believed, once it had
+// looked, within `tolerance` (m, in the table's plane) of where they stood.
+double LookReturn(const LookRecord& r, double tolerance, const std::filesystem::path& dir) {
+  const std::string look =
+      dir.string() + ", episode " + std::to_string(r.seed) + ", look " + std::to_string(r.look);
+  if (r.truth.empty())
+    throw core::ConfigError(look, "truth",
+                            "no objects' truth for --return look (a run written before it was "
+                            "logged: use a fresh directory)");
+  int targets = 0, found = 0;
+  for (const auto& [name, truth] : r.truth) {
+    if (name == r.held) continue;
+    const auto after = std::find_if(r.after.begin(), r.after.end(),
+                                    [&name = name](const auto& p) { return p.first == name; });
+    if (after == r.after.end())
+      throw core::ConfigError(look, "after", "no belief in " + name + " after the look");
+    ++targets;
+    found += (after->second.translation - truth.translation).head<2>().norm() <= tolerance;
+  }
+  // Everything held: nothing was to be shown, and nothing missed.
+  return targets == 0 ? 1.0 : double(found) / targets;
+}
+
+const char* ReturnName(SensingQTrainOptions::Return ret) {
+  switch (ret) {
+    case SensingQTrainOptions::Return::kSuccess:
+      return "success";
+    case SensingQTrainOptions::Return::kCloseness:
+      return "closeness";
+    case SensingQTrainOptions::Return::kLook:
+      return "look";
+  }
+  return "?";
 }
 
 // The looks a worker's file holds, by episode seed and look; a look written twice (an episode
@@ -165,8 +220,62 @@ samrl::OrbitMount MountFromJson(const nlohmann::json& j) {
   return m;
 }
 
+// Where the objects stand in the simulated twin (its grader state), by name.
+NamedPoses TruePoses(const reality::ProxyReality& robot, const std::vector<std::string>& names) {
+  const nlohmann::json state = robot.GraderState();
+  NamedPoses poses;
+  for (const std::string& name : names) {
+    const auto x = state.at("objects").at(name).get<std::array<double, 3>>();
+    const auto q = state.at("object_quats").at(name).get<std::array<double, 4>>();
+    core::Pose p;
+    p.translation = {x[0], x[1], x[2]};
+    p.rotation = core::Quat(q[0], q[1], q[2], q[3]).normalized();
+    poses.emplace_back(name, p);
+  }
+  return poses;
+}
+
+// The twin actor, as the harness runs it, with each look's line written once the actor has
+// looked: the line then holds where it believed the objects after that look (LookRecord::after).
+class LookWriter : public reality::Operator {
+ public:
+  LookWriter(const std::filesystem::path& file, const std::vector<std::string>& objects)
+      : file_(file), objects_(objects), out_(file, std::ios::app) {
+    if (!out_) throw core::IoError("train samrl: cannot append to " + file.string());
+  }
+  void set_actor(samrl::TwinActor* actor) { actor_ = actor; }
+  // A look begins: the one before it, if any, is done.
+  void Looking(LookRecord r) {
+    Flush();
+    pending_ = std::move(r);
+  }
+  reality::OperatorInput Next(const reality::Observation& o) override {
+    reality::OperatorInput input = actor_->Next(o);
+    Flush();
+    return input;
+  }
+  std::string name() const override { return actor_->name(); }
+
+ private:
+  void Flush() {
+    if (!pending_) return;
+    const auto& estimates = actor_->estimates();
+    for (std::size_t i = 0; i < estimates.size() && i < objects_.size(); ++i)
+      pending_->after.emplace_back(objects_[i], estimates[i].pose);
+    out_ << LookJson(*pending_).dump() << "\n" << std::flush;
+    if (!out_) throw core::IoError("train samrl: cannot write to " + file_.string());
+    pending_.reset();
+  }
+  std::filesystem::path file_;
+  std::vector<std::string> objects_;
+  std::ofstream out_;
+  samrl::TwinActor* actor_ = nullptr;
+  std::optional<LookRecord> pending_;
+};
+
 // One worker: its own simulated twin and twin actor, the trials i % workers == worker. Each look
-// is from the episode's next random view, and is appended to `looks_file`.
+// is from the episode's next random view, and is appended to `looks_file` once the actor has
+// looked.
 RealityEvalReport RunEpisodes(const sim::TaskSpec& twin, const SensingQTrainOptions& options,
                               const samrl::OrbitMount& mount, const nlohmann::json& header,
                               int worker, const std::filesystem::path& log,
@@ -176,8 +285,7 @@ RealityEvalReport RunEpisodes(const sim::TaskSpec& twin, const SensingQTrainOpti
   const sim::CameraIntrinsics capture =
       samrl::ScaleIntrinsics(sim::MakeCamera(twin.camera).intrinsics, options.capture_scale);
   DropTornLine(looks_file);
-  std::ofstream looks_out(looks_file, std::ios::app);
-  if (!looks_out) throw core::IoError("train samrl: cannot append to " + looks_file.string());
+  LookWriter writer(looks_file, twin.objects);
   uint64_t episode = 0;
   int looked = 0;
   std::optional<EpisodeViews> views;
@@ -193,16 +301,17 @@ RealityEvalReport RunEpisodes(const sim::TaskSpec& twin, const SensingQTrainOpti
     r.step = context.step;
     r.steps = context.steps;
     r.occluders = context.occluders;
-    looks_out << LookJson(r).dump() << "\n" << std::flush;
-    if (!looks_out) throw core::IoError("train samrl: cannot write to " + looks_file.string());
-    return std::vector<reality::RgbdFrame>{
-        robot->Capture({samrl::OrbitPose(mount, r.azimuth, r.elevation), capture})};
+    r.truth = TruePoses(*robot, twin.objects);
+    const core::Pose camera = samrl::OrbitPose(mount, r.azimuth, r.elevation);
+    writer.Looking(std::move(r));
+    return std::vector<reality::RgbdFrame>{robot->Capture({camera, capture})};
   };
   samrl::RelookOptions relook;
   relook.max_looks = options.max_looks;
   // The workers share the cores: each fits its objects on one thread.
   samrl::TwinActor actor(std::make_shared<const sim::Task>(twin), *robot, look, true, {}, {},
                          relook, options.workers > 1 ? 1 : 0);
+  writer.set_actor(&actor);
   RealityEvalOptions o;
   o.levels = {options.level};
   o.trials = options.episodes;
@@ -217,7 +326,7 @@ RealityEvalReport RunEpisodes(const sim::TaskSpec& twin, const SensingQTrainOpti
     views.emplace(mount, seed);
     actor.Begin(seed);
   };
-  return EvaluateOperatorOnReality(*robot, {&actor, begin, header, nullptr}, twin, o, log);
+  return EvaluateOperatorOnReality(*robot, {&writer, begin, header, nullptr}, twin, o, log);
 }
 
 }  // namespace
@@ -298,7 +407,7 @@ SensingQTrainReport TrainSensingQ(const sim::TaskSpec& twin, const SensingQTrain
   nlohmann::json views = nlohmann::json::array();
   for (const TrialRecord& t : trials) {
     report.successes += t.success;
-    const double episode_return = EpisodeReturn(t, options.closeness, out_dir);
+    const double episode_return = EpisodeReturn(t, options.ret, out_dir);
     for (auto it = looks.lower_bound({t.seed, 0}); it != looks.end() && it->first.first == t.seed;
          ++it) {
       const LookRecord& r = it->second;
@@ -308,9 +417,12 @@ SensingQTrainReport TrainSensingQ(const sim::TaskSpec& twin, const SensingQTrain
       const real2sim::SoftImage image = real2sim::SoftRasterize(
           seen.mesh, search,
           samrl::OrbitPose(mount, torch::tensor({r.azimuth, r.elevation}, torch::kFloat64)));
+      const double look_return = options.ret == SensingQTrainOptions::Return::kLook
+                                     ? LookReturn(r, options.look_tolerance, out_dir)
+                                     : episode_return;
       samples.push_back({samrl::ViewInput(image),
                          options.plan ? samrl::PlanInput(r.step, steps) : torch::Tensor(),
-                         episode_return, t.trial});
+                         look_return, t.trial});
       views.push_back({{"trial", t.trial},
                        {"look", r.look},
                        {"azimuth", r.azimuth},
@@ -319,7 +431,7 @@ SensingQTrainReport TrainSensingQ(const sim::TaskSpec& twin, const SensingQTrain
                        {"occluders", r.occluders.size()},
                        {"targets_fill", seen.score(image).item<double>()},
                        {"success", t.success},
-                       {"return", episode_return}});
+                       {"return", look_return}});
     }
   }
   report.episodes = int(trials.size());
@@ -369,7 +481,8 @@ SensingQTrainReport TrainSensingQ(const sim::TaskSpec& twin, const SensingQTrain
                                  {"seed", options.seed},
                                  {"capture_scale", options.capture_scale},
                                  {"max_looks", options.max_looks},
-                                 {"return", options.closeness ? "closeness" : "success"},
+                                 {"return", ReturnName(options.ret)},
+                                 {"look_tolerance", options.look_tolerance},
                                  {"plan", options.plan},
                                  {"fit_steps", fit.steps}}},
                                {"episodes", report.episodes},

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <fstream>
 #include <functional>
 #include <nlohmann/json.hpp>
@@ -36,6 +37,20 @@ void EditLines(const std::filesystem::path& file,
   for (int n = 0; std::getline(in, line); ++n) text += edit(n, line) + "\n";
   in.close();
   std::ofstream(file) << text;
+}
+
+// The share of a look's objects not held that `belief` (a looks line's "objects" or "after") puts
+// within 3 mm of its "truth", in the table's plane.
+double ShareFound(const nlohmann::json& look, const char* belief) {
+  int targets = 0, found = 0;
+  for (const auto& [name, truth] : look.at("truth").items()) {
+    if (name == look.at("held").get<std::string>()) continue;
+    const auto& b = look.at(belief).at(name);
+    ++targets;
+    found += std::hypot(b[0].get<double>() - truth[0].get<double>(),
+                        b[1].get<double>() - truth[1].get<double>()) <= 0.003;
+  }
+  return targets == 0 ? 1.0 : double(found) / targets;
 }
 
 // A small run: `episodes` on two workers, frames at twice the task camera's resolution, Q fitted
@@ -95,7 +110,7 @@ TEST(TrainSensingQ, RunsEpisodesResumesAndLoadsForItsTwinOnly) {
   EXPECT_EQ(view_only.resumed, 6) << "the same episodes, fitted again";
   EXPECT_EQ(LoadSensingQ(view_only.q_file, twin).net->action_dim(), 0);
   // --return closeness: the same episodes, each return how near the twin came to success.
-  o.closeness = true;
+  o.ret = SensingQTrainOptions::Return::kCloseness;
   const SensingQTrainReport dense = TrainSensingQ(twin, o, dir / "two");
   EXPECT_EQ(dense.resumed, 6);
   const nlohmann::json dense_views = ReadJson(dir / "two" / "q.json").at("views");
@@ -125,7 +140,51 @@ TEST(TrainSensingQ, RunsEpisodesResumesAndLoadsForItsTwinOnly) {
   } catch (const core::Error& e) {
     EXPECT_NE(std::string(e.what()).find("success_closeness"), std::string::npos) << e.what();
   }
-  o.closeness = false;
+
+  // --return look: each look's own return, the share of the objects not held that the actor
+  // believed within 3 mm of where they stood once it had looked. Every look line holds the twin's
+  // truth and the belief after the look; the belief before a first look is the twin's nominal
+  // scene, which the random scenes put elsewhere, so it finds less than the belief after.
+  o.ret = SensingQTrainOptions::Return::kLook;
+  const SensingQTrainReport own = TrainSensingQ(twin, o, dir / "two");
+  EXPECT_EQ(own.resumed, 6);
+  double before_first = 0, after_first = 0;
+  for (const char* name : {"looks.0.jsonl", "looks.1.jsonl"}) {
+    std::ifstream in(dir / "two" / name);
+    for (std::string line; std::getline(in, line);) {
+      const nlohmann::json look = nlohmann::json::parse(line);
+      ASSERT_EQ(look.at("truth").size(), twin.objects.size()) << line;
+      ASSERT_EQ(look.at("after").size(), twin.objects.size()) << line;
+      if (look.at("look").get<int>() == 0) {
+        before_first += ShareFound(look, "objects");
+        after_first += ShareFound(look, "after");
+      }
+    }
+  }
+  EXPECT_GT(after_first, before_first) << "the belief after a first look is no nearer the truth";
+  int found_all = 0, missed = 0;
+  const nlohmann::json own_views = ReadJson(dir / "two" / "q.json").at("views");
+  for (const auto& v : own_views) {
+    const double r = v.at("return");
+    EXPECT_TRUE(r == 0 || r == 0.5 || r == 1) << v;
+    found_all += r == 1;
+    missed += r < 1;
+  }
+  EXPECT_GT(found_all, 0) << "no look found its objects";
+  EXPECT_GT(missed, 0) << "every look found its objects: the return tells no view from another";
+  // Looks logged before the truth was are refused by name, not read as found.
+  EditLines(dir / "two" / "looks.1.jsonl", [](int n, const std::string& line) {
+    nlohmann::json j = nlohmann::json::parse(line);
+    if (n == 0) j.erase("truth");
+    return j.dump();
+  });
+  try {
+    TrainSensingQ(twin, o, dir / "two");
+    ADD_FAILURE() << "a look without the twin's truth was fitted";
+  } catch (const core::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("truth"), std::string::npos) << e.what();
+  }
+  o.ret = SensingQTrainOptions::Return::kSuccess;
   EXPECT_EQ(q.mount.radius, samrl::ObjectsMount(sim::Task(twin)).radius);
   try {
     LoadSensingQ(two.q_file, sim::LoadTaskSpec("peg_insertion"));
