@@ -3,6 +3,7 @@
 #include <unistd.h>
 
 #include <iostream>
+#include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
 
@@ -327,17 +328,15 @@ void AddTrainSamrl(CLI::App& train, int& exit_code) {
   c->add_flag("--view-only{false}", o.plan,
               "Q reads the view alone, not the actor's plan (its next step) with it");
   using Return = pipeline::SensingQTrainOptions::Return;
+  std::map<std::string, Return> returns;
+  for (const Return r : {Return::kSuccess, Return::kCloseness, Return::kLook})
+    returns[pipeline::ReturnName(r)] = r;
   c->add_option_function<std::string>(
-       "--return",
-       [&o](const std::string& r) {
-         o.ret = r == "closeness" ? Return::kCloseness
-                 : r == "look"    ? Return::kLook
-                                  : Return::kSuccess;
-       },
+       "--return", [&o, returns](const std::string& r) { o.ret = returns.at(r); },
        "what Q predicts: success (1 or 0), closeness (how near the twin came to success, 1 on "
        "success) or look (the share of the objects not held that the actor believed within "
        "--look-tolerance of where they stood once it had looked; default success)")
-      ->check(CLI::IsMember({"success", "closeness", "look"}));
+      ->check(CLI::IsMember(returns));
   c->add_option("--look-tolerance", o.look_tolerance,
                 "m, in the table's plane: a belief this near counts as found (--return look)")
       ->check(CLI::PositiveNumber);

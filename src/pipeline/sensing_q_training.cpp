@@ -159,18 +159,6 @@ double LookReturn(const LookRecord& r, double tolerance, const std::filesystem::
   return targets == 0 ? 1.0 : double(found) / targets;
 }
 
-const char* ReturnName(SensingQTrainOptions::Return ret) {
-  switch (ret) {
-    case SensingQTrainOptions::Return::kSuccess:
-      return "success";
-    case SensingQTrainOptions::Return::kCloseness:
-      return "closeness";
-    case SensingQTrainOptions::Return::kLook:
-      return "look";
-  }
-  return "?";
-}
-
 // The looks a worker's file holds, by episode seed and look; a look written twice (an episode
 // killed and run again) keeps its last line.
 void ReadLooks(const std::filesystem::path& file,
@@ -218,21 +206,6 @@ samrl::OrbitMount MountFromJson(const nlohmann::json& j) {
   m.min_elevation = j.at("elevation").at(0).get<double>();
   m.max_elevation = j.at("elevation").at(1).get<double>();
   return m;
-}
-
-// Where the objects stand in the simulated twin (its grader state), by name.
-NamedPoses TruePoses(const reality::ProxyReality& robot, const std::vector<std::string>& names) {
-  const nlohmann::json state = robot.GraderState();
-  NamedPoses poses;
-  for (const std::string& name : names) {
-    const auto x = state.at("objects").at(name).get<std::array<double, 3>>();
-    const auto q = state.at("object_quats").at(name).get<std::array<double, 4>>();
-    core::Pose p;
-    p.translation = {x[0], x[1], x[2]};
-    p.rotation = core::Quat(q[0], q[1], q[2], q[3]).normalized();
-    poses.emplace_back(name, p);
-  }
-  return poses;
 }
 
 // The twin actor, as the harness runs it, with each look's line written once the actor has
@@ -301,7 +274,7 @@ RealityEvalReport RunEpisodes(const sim::TaskSpec& twin, const SensingQTrainOpti
     r.step = context.step;
     r.steps = context.steps;
     r.occluders = context.occluders;
-    r.truth = TruePoses(*robot, twin.objects);
+    r.truth = robot->ObjectPoses();
     const core::Pose camera = samrl::OrbitPose(mount, r.azimuth, r.elevation);
     writer.Looking(std::move(r));
     return std::vector<reality::RgbdFrame>{robot->Capture({camera, capture})};
@@ -330,6 +303,18 @@ RealityEvalReport RunEpisodes(const sim::TaskSpec& twin, const SensingQTrainOpti
 }
 
 }  // namespace
+
+const char* ReturnName(SensingQTrainOptions::Return ret) {
+  switch (ret) {
+    case SensingQTrainOptions::Return::kSuccess:
+      return "success";
+    case SensingQTrainOptions::Return::kCloseness:
+      return "closeness";
+    case SensingQTrainOptions::Return::kLook:
+      return "look";
+  }
+  return "?";
+}
 
 std::string TwinFingerprint(const sim::TaskSpec& twin) {
   return Fingerprint().AddFile(twin.file).AddFile(twin.file.parent_path() / twin.scene).Hex();

@@ -76,6 +76,9 @@ struct SensingQTrainReport {
   double seconds = 0;
 };
 
+// --return's name of a return: success, closeness or look.
+const char* ReturnName(SensingQTrainOptions::Return ret);
+
 // The twin task's identity by content (its task file and scene).
 std::string TwinFingerprint(const sim::TaskSpec& twin);
 

@@ -231,22 +231,34 @@ SuccessAnswer ProxyReality::QuerySuccess() {
   return env_->Success() ? SuccessAnswer::kSuccess : SuccessAnswer::kFailure;
 }
 
+std::vector<std::pair<std::string, core::Pose>> ProxyReality::ObjectPoses() const {
+  const mjData* d = env_->data();
+  const auto& index = task_->index();
+  const core::Pose to_base = env_->base().Inverse();
+  std::vector<std::pair<std::string, core::Pose>> poses;
+  for (size_t k = 0; k < index.object_bodies.size(); ++k) {
+    const double* q = d->xquat + 4 * index.object_bodies[k];
+    core::Pose p;
+    p.rotation = to_base.rotation * core::Quat(q[0], q[1], q[2], q[3]);
+    p.translation = to_base * Eigen::Vector3d(d->xpos + 3 * index.object_bodies[k]);
+    poses.emplace_back(task_->spec().objects[k], p);
+  }
+  return poses;
+}
+
 nlohmann::json ProxyReality::GraderState() const {
   const mjModel* m = env_->model();
   const mjData* d = env_->data();
   const auto& spec = task_->spec();
   const auto& index = task_->index();
-  const core::Pose to_base = env_->base().Inverse();
   auto xyz = [](const Eigen::Vector3d& v) { return nlohmann::json{v.x(), v.y(), v.z()}; };
   nlohmann::json joints = nlohmann::json::object(), objects = nlohmann::json::object(),
                  object_quats = nlohmann::json::object();
   for (size_t k = 0; k < index.state_joints.size(); ++k)
     joints[spec.joints[k]] = d->qpos[m->jnt_qposadr[index.state_joints[k]]];
-  for (size_t k = 0; k < index.object_bodies.size(); ++k) {
-    const double* q = d->xquat + 4 * index.object_bodies[k];
-    const core::Quat in_base = to_base.rotation * core::Quat(q[0], q[1], q[2], q[3]);
-    objects[spec.objects[k]] = xyz(to_base * Eigen::Vector3d(d->xpos + 3 * index.object_bodies[k]));
-    object_quats[spec.objects[k]] = {in_base.w(), in_base.x(), in_base.y(), in_base.z()};
+  for (const auto& [name, p] : ObjectPoses()) {
+    objects[name] = xyz(p.translation);
+    object_quats[name] = {p.rotation.w(), p.rotation.x(), p.rotation.y(), p.rotation.z()};
   }
   // What the arm touches (besides itself): a body named by the world's MJCF, geom if named.
   auto name = [m](int geom) {

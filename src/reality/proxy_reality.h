@@ -167,6 +167,9 @@ class ProxyReality : public Robot {
   // position, the gripper's opening and the tool's position (robot base frame, m or rad), and
   // what the arm touches ("arm_contacts": "arm body - other body/geom", robot geom group 1).
   nlohmann::json GraderState() const;
+  // For graders only: each task object's pose now, by name, in the robot base frame (what
+  // GraderState reports as "objects" and "object_quats").
+  std::vector<std::pair<std::string, core::Pose>> ObjectPoses() const;
   // For graders and tests only: how far the last Capture's camera was from where it was asked to
   // be, in the camera's frame (the true camera is the requested pose times this).
   const core::Pose& last_capture_error() const { return last_capture_error_; }
