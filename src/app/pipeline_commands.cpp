@@ -71,7 +71,8 @@ void AddEval(CLI::App& parent, int& exit_code) {
       ->description(
           "tcp://host:port of a robot (bridge protocol), proxy:WORLD to start a proxy-reality "
           "world, or twin: the --task's own twin simulated as a robot (its scene and controller, "
-          "an ideal depth sensor), to compare the same trials in the twin and on reality");
+          "the depth noise calibrate measured, if any), to compare the same trials in the twin and "
+          "on reality");
   c->add_option("--policy", cli->policy, "point-cloud policy (train bc / train distill)")
       ->check(CLI::ExistingFile);
   c->add_option(
@@ -105,7 +106,8 @@ void AddEval(CLI::App& parent, int& exit_code) {
     std::unique_ptr<reality::ProxyReality> world;
     std::unique_ptr<reality::RealityConnection> connection;
     if (cli->reality.address == "twin") {
-      world = reality::ProxyReality::SimulatedTwin(task);
+      world =
+          reality::ProxyReality::SimulatedTwin(task, reality::ProxyReality::Sensor::kCalibrated);
     } else if (cli->grader_state) {
       if (cli->reality.address.rfind(proxy, 0) != 0)
         throw core::Error(

@@ -17,7 +17,8 @@ namespace {
 // once from `view` at the frame size train samrl used.
 int SuccessesFromView(const sim::TaskSpec& twin, const core::Pose& view, int episodes,
                       int capture_scale, const std::filesystem::path& log) {
-  const auto robot = reality::ProxyReality::SimulatedTwin(twin);
+  const auto robot =
+      reality::ProxyReality::SimulatedTwin(twin, reality::ProxyReality::Sensor::kCalibrated);
   samrl::RelookOptions once;
   once.max_looks = 1;
   samrl::TwinActor actor(

@@ -254,7 +254,8 @@ RealityEvalReport RunEpisodes(const sim::TaskSpec& twin, const SensingQTrainOpti
                               int worker, const std::filesystem::path& log,
                               const std::filesystem::path& looks_file,
                               const std::function<void(const TrialRecord&)>& on_trial) {
-  const auto robot = reality::ProxyReality::SimulatedTwin(twin);
+  const auto robot =
+      reality::ProxyReality::SimulatedTwin(twin, reality::ProxyReality::Sensor::kCalibrated);
   const sim::CameraIntrinsics capture =
       samrl::ScaleIntrinsics(sim::MakeCamera(twin.camera).intrinsics, options.capture_scale);
   DropTornLine(looks_file);

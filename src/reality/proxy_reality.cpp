@@ -83,7 +83,8 @@ ProxyReality::ProxyReality(const std::filesystem::path& world_dir)
 ProxyReality::ProxyReality(const WorldSpec& spec, const std::filesystem::path& world_dir)
     : ProxyReality(spec, sim::LoadTaskSpec((world_dir / spec.task).string()), true) {}
 
-std::unique_ptr<ProxyReality> ProxyReality::SimulatedTwin(const sim::TaskSpec& twin) {
+std::unique_ptr<ProxyReality> ProxyReality::SimulatedTwin(const sim::TaskSpec& twin,
+                                                          Sensor sensor) {
   WorldSpec spec;
   spec.name = "twin:" + twin.name;
   spec.controller.interpolation = 1;
@@ -92,7 +93,19 @@ std::unique_ptr<ProxyReality> ProxyReality::SimulatedTwin(const sim::TaskSpec& t
   d.sigma0 = d.sigma_z2 = d.quantization = 0;
   d.edge_dropout = d.dark_dropout = d.shiny_dropout = 0;
   spec.scan.position_sigma = spec.scan.rotation_sigma = 0;
-  return std::unique_ptr<ProxyReality>(new ProxyReality(std::move(spec), twin, false));
+  std::unique_ptr<ProxyReality> robot(new ProxyReality(std::move(spec), twin, false));
+  if (sensor == Sensor::kCalibrated && !twin.camera.noise.off()) {
+    robot->twin_noise_ = twin.camera.noise;
+    robot->twin_surface_dropout_ =
+        sim::SurfaceDropoutByGeom(robot->env_->model(), robot->twin_noise_);
+  }
+  return robot;
+}
+
+void ProxyReality::Sense(int width, int height, const int* geom, std::vector<float>& depth,
+                         core::Rng& rng, std::vector<uint16_t>& depth_mm) const {
+  sim::AddDepthNoise(depth.data(), width, height, twin_noise_, rng, geom, twin_surface_dropout_);
+  ApplyDepthSensor(spec_.depth, env_->model(), width, height, geom, depth, rng, depth_mm);
 }
 
 ProxyReality::ProxyReality(WorldSpec spec, sim::TaskSpec task, bool hidden_physics)
@@ -149,8 +162,7 @@ RgbdFrame ProxyReality::Frame() {
   // A real camera sees the arm too; the pipeline removes it using forward kinematics.
   caster_->Render(env_->model(), env_->data(), env_->base(), depth_.data(), frame.rgb.data(), true,
                   geom_.data());
-  ApplyDepthSensor(spec_.depth, env_->model(), k.width, k.height, geom_.data(), depth_, noise_rng_,
-                   frame.depth);
+  Sense(k.width, k.height, geom_.data(), depth_, noise_rng_, frame.depth);
   return frame;
 }
 
@@ -186,8 +198,7 @@ RgbdFrame ProxyReality::Capture(const CaptureRequest& request) {
   std::vector<int> geom(n);
   scan_caster_->Render(env_->model(), env_->data(), env_->base(), depth.data(), frame.rgb.data(),
                        true, geom.data());
-  ApplyDepthSensor(spec_.depth, env_->model(), k.width, k.height, geom.data(), depth, scan_rng_,
-                   frame.depth);
+  Sense(k.width, k.height, geom.data(), depth, scan_rng_, frame.depth);
   return frame;
 }
 

@@ -142,10 +142,16 @@ class ProxyReality : public Robot {
   explicit ProxyReality(const std::filesystem::path& world_dir);
   ~ProxyReality() override;
 
+  // The depth sensor of a simulated twin: the ray caster's depth to the millimetre with no holes
+  // (kIdeal), or with the noise calibration measured on the real camera (kCalibrated: the twin's
+  // `camera.noise`, applied by sim::AddDepthNoise as the twin's rendered clouds get it; an
+  // uncalibrated twin has none, so its frames are the ideal ones).
+  enum class Sensor { kIdeal, kCalibrated };
+
   // A twin run as a robot, for the simulated episodes SAM-RL learns from: the twin task's own
-  // scene, physics and position controller (commands followed at once), an ideal depth sensor
-  // and cameras exactly where they are asked to be. It reads no world file.
-  static std::unique_ptr<ProxyReality> SimulatedTwin(const sim::TaskSpec& twin);
+  // scene, physics and position controller (commands followed at once), `sensor`, and cameras
+  // exactly where they are asked to be. It reads no world file.
+  static std::unique_ptr<ProxyReality> SimulatedTwin(const sim::TaskSpec& twin, Sensor sensor);
 
   RobotInfo Info() override;
   Observation Observe(bool with_frames) override;
@@ -179,6 +185,10 @@ class ProxyReality : public Robot {
   // task's own physics stand (a simulated twin).
   ProxyReality(WorldSpec spec, sim::TaskSpec task, bool hidden_physics);
   ProxyReality(const WorldSpec& spec, const std::filesystem::path& world_dir);
+  // The sensor's depth (mm) from a rendered depth image (m, changed in place) and the geom each
+  // pixel sees: the world's sensor model, after the twin's calibrated noise on a simulated twin.
+  void Sense(int width, int height, const int* geom, std::vector<float>& depth, core::Rng& rng,
+             std::vector<uint16_t>& depth_mm) const;
   WorldSpec spec_;
   std::shared_ptr<const sim::Task> task_;
   std::unique_ptr<sim::Env> env_;
@@ -191,6 +201,8 @@ class ProxyReality : public Robot {
   std::vector<float> depth_;
   std::vector<int> geom_;
   core::Rng scan_rng_;
+  sim::DepthNoise twin_noise_;                // a simulated twin's calibrated sensor (else off)
+  std::vector<double> twin_surface_dropout_;  // its surfaces' dropouts, by geom id
   core::Pose last_capture_error_ = core::Pose::Identity();
   double clock_ = 0;
 };

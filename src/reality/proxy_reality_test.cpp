@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "sim/camera.h"
 #include "sim/expert.h"
 
 namespace twinforge::reality {
@@ -209,7 +210,7 @@ TEST(DepthSensor, NoiseGrowsWithRangeAndQuantizes) {
 // succeeds through the robot interface as it does in the twin.
 TEST(SimulatedTwin, IsTheTwinWithAnIdealSensor) {
   const sim::TaskSpec spec = sim::LoadTaskSpec("peg_insertion_occluded");
-  const auto robot = ProxyReality::SimulatedTwin(spec);
+  const auto robot = ProxyReality::SimulatedTwin(spec, ProxyReality::Sensor::kIdeal);
   EXPECT_EQ(robot->Info().name, "proxy:twin:peg_insertion_occluded");
   const sim::Task twin(spec);
   const mjModel* m = robot->hidden_env().model();
@@ -236,6 +237,68 @@ TEST(SimulatedTwin, IsTheTwinWithAnIdealSensor) {
   }
   EXPECT_GT(returns, 1000);
   EXPECT_GE(ExpertSuccesses(*robot), 6);
+}
+
+// A simulated twin with its calibrated sensor (what train samrl and `eval --reality twin` run)
+// makes its frames as the twin's `camera.noise` says the real camera does: no return at the
+// depth edges it loses all of, about `dropout` lost elsewhere, none on a surface listed with
+// dropout 1, and `sigma0` of noise on the rest. An uncalibrated twin's frames are the ideal ones.
+TEST(SimulatedTwin, ACalibratedTwinsFramesHaveItsSensorsNoise) {
+  sim::TaskSpec spec = sim::LoadTaskSpec("peg_insertion_occluded");
+  const auto capture = [](ProxyReality& robot, const sim::TaskSpec& s) {
+    robot.Reset({3, 1});
+    const sim::Camera camera = sim::MakeCamera(s.camera);
+    return robot.Capture({camera.pose, camera.intrinsics});
+  };
+  const RgbdFrame ideal =
+      capture(*ProxyReality::SimulatedTwin(spec, ProxyReality::Sensor::kIdeal), spec);
+  EXPECT_EQ(
+      capture(*ProxyReality::SimulatedTwin(spec, ProxyReality::Sensor::kCalibrated), spec).depth,
+      ideal.depth)
+      << "an uncalibrated twin has no noise to add";
+
+  sim::DepthNoise& noise = spec.camera.noise;
+  noise.sigma0 = 0.003;
+  noise.edge_dropout = 1.0;
+  noise.dropout = 0.2;
+  noise.surfaces = {{"panel", 1.0}};
+  const auto robot = ProxyReality::SimulatedTwin(spec, ProxyReality::Sensor::kCalibrated);
+  const RgbdFrame noisy = capture(*robot, spec);
+  const auto& k = noisy.intrinsics;
+  const mjModel* m = robot->hidden_env().model();
+  sim::RayCaster caster(sim::Camera{k, noisy.extrinsics}, m);
+  std::vector<float> clean(k.width * k.height);
+  std::vector<int> geom(clean.size());
+  caster.Render(m, robot->hidden_env().data(), robot->hidden_env().base(), clean.data(), nullptr,
+                true, geom.data());
+  const int panel = mj_name2id(m, mjOBJ_GEOM, "panel");
+  ASSERT_GE(panel, 0);
+  const std::vector<uint8_t> edges = sim::DepthEdges(clean.data(), k.width, k.height, 0.02);
+  int edge_kept = 0, panel_seen = 0, panel_kept = 0, inside = 0, inside_kept = 0;
+  double sum2 = 0;
+  for (std::size_t i = 0; i < clean.size(); ++i) {
+    if (clean[i] <= 0) continue;
+    const bool kept = noisy.depth[i] > 0;
+    if (edges[i]) {
+      edge_kept += kept;
+    } else if (geom[i] == panel) {
+      ++panel_seen;
+      panel_kept += kept;
+    } else {
+      ++inside;
+      if (!kept) continue;
+      ++inside_kept;
+      const double e = noisy.depth[i] * 1e-3 - clean[i];
+      sum2 += e * e;
+    }
+  }
+  EXPECT_EQ(edge_kept, 0);
+  EXPECT_GT(panel_seen, 100) << "the panel is in the fixed camera's view";
+  EXPECT_EQ(panel_kept, 0);
+  ASSERT_GT(inside, 1000);
+  EXPECT_NEAR(1.0 - double(inside_kept) / inside, 0.2, 0.03);
+  // 3 mm of noise, reported to the millimetre (+1/12 mm^2).
+  EXPECT_NEAR(std::sqrt(sum2 / inside_kept), std::sqrt(0.003 * 0.003 + 1e-6 / 12), 0.0003);
 }
 
 }  // namespace

@@ -24,7 +24,8 @@ nlohmann::json RunPoseBench(std::shared_ptr<const sim::Task> twin,
   if (spec.objects.empty()) throw core::Error("pose bench: task " + spec.name + " has no objects");
   // The twin run as a robot with an ideal depth sensor (ProxyReality::SimulatedTwin): its frame
   // as a robot would send it, the arm in view.
-  const auto robot = reality::ProxyReality::SimulatedTwin(spec);
+  const auto robot =
+      reality::ProxyReality::SimulatedTwin(spec, reality::ProxyReality::Sensor::kIdeal);
   const reality::Observation o = robot->Reset({options.seed, options.level});
   const sim::Env& env = robot->hidden_env();
   const mjModel* m = env.model();

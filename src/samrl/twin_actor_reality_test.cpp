@@ -272,7 +272,8 @@ TEST(PoseEstimate, ARegistrationThatSlidOffTheArmIsNotUsed) {
   learn::PinMathThreads(1);
   const sim::TaskSpec spec = sim::LoadTaskSpec("peg_insertion_occluded");
   const auto task = std::make_shared<const sim::Task>(spec);
-  const auto twin = reality::ProxyReality::SimulatedTwin(spec);
+  const auto twin =
+      reality::ProxyReality::SimulatedTwin(spec, reality::ProxyReality::Sensor::kIdeal);
   const reality::Observation o = twin->Reset({17661929549578578993ull, 1});
   const sim::Camera camera = sim::MakeCamera(spec.camera);
   const reality::RgbdFrame frame = twin->Capture(
