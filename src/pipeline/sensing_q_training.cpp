@@ -246,6 +246,18 @@ class LookWriter : public reality::Operator {
   std::optional<LookRecord> pending_;
 };
 
+// How the episodes' actor looks again: as eval's twin actor does when its look chooses the view
+// (--look q or active: the held object found in the hand, and an object a later look sees
+// believed where that look put it), so that Q learns the views of the actor that will use it.
+// Before stop 95 the episodes ran without either, so a later look that saw the block within the
+// 5 mm `moved` bound left the belief, and the look's return, as they were.
+samrl::RelookOptions EpisodeRelook(const SensingQTrainOptions& options) {
+  samrl::RelookOptions relook;
+  relook.max_looks = options.max_looks;
+  relook.measure_held = relook.refine = true;
+  return relook;
+}
+
 // One worker: its own simulated twin and twin actor, the trials i % workers == worker. Each look
 // is from the episode's next random view, and is appended to `looks_file` once the actor has
 // looked.
@@ -280,8 +292,7 @@ RealityEvalReport RunEpisodes(const sim::TaskSpec& twin, const SensingQTrainOpti
     writer.Looking(std::move(r));
     return std::vector<reality::RgbdFrame>{robot->Capture({camera, capture})};
   };
-  samrl::RelookOptions relook;
-  relook.max_looks = options.max_looks;
+  const samrl::RelookOptions relook = EpisodeRelook(options);
   // The workers share the cores: each fits its objects on one thread.
   samrl::TwinActor actor(std::make_shared<const sim::Task>(twin), *robot, look, true, {}, {},
                          relook, options.workers > 1 ? 1 : 0);
@@ -337,6 +348,8 @@ SensingQTrainReport TrainSensingQ(const sim::TaskSpec& twin, const SensingQTrain
                                  {"look", "a random view on the mount at each look"},
                                  {"max_looks", options.max_looks},
                                  {"look_aside", samrl::RelookOptions{}.look_aside},
+                                 {"measure_held", EpisodeRelook(options).measure_held},
+                                 {"refine", EpisodeRelook(options).refine},
                                  {"twin_hash", twin_hash},
                                  {"mount", MountJson(mount)},
                                  {"capture_scale", options.capture_scale}};

@@ -148,7 +148,11 @@ TEST(TrainSensingQ, RunsEpisodesResumesAndLoadsForItsTwinOnly) {
   o.ret = SensingQTrainOptions::Return::kLook;
   const SensingQTrainReport own = TrainSensingQ(twin, o, dir / "two");
   EXPECT_EQ(own.resumed, 6);
+  // The episodes' actor looks again as eval's does with a chosen view (EpisodeRelook): a later
+  // look that sees an object it does not hold believes it where it put it, even a shift too small
+  // to count as a move (under 2.5 mm, the least `moved` bound); without, only moves change it.
   double before_first = 0, after_first = 0;
+  int refined = 0;
   for (const char* name : {"looks.0.jsonl", "looks.1.jsonl"}) {
     std::ifstream in(dir / "two" / name);
     for (std::string line; std::getline(in, line);) {
@@ -158,10 +162,19 @@ TEST(TrainSensingQ, RunsEpisodesResumesAndLoadsForItsTwinOnly) {
       if (look.at("look").get<int>() == 0) {
         before_first += ShareFound(look, "objects");
         after_first += ShareFound(look, "after");
+        continue;
+      }
+      for (const auto& [name, after] : look.at("after").items()) {
+        if (look.at("held") == name) continue;
+        const auto& before = look.at("objects").at(name);
+        const double shift = std::hypot(after[0].get<double>() - before[0].get<double>(),
+                                        after[1].get<double>() - before[1].get<double>());
+        refined += shift > 1e-5 && shift < 0.0025;
       }
     }
   }
   EXPECT_GT(after_first, before_first) << "the belief after a first look is no nearer the truth";
+  EXPECT_GT(refined, 0) << "no later look put an object where it saw it, short of a move";
   int found_all = 0, missed = 0;
   const nlohmann::json own_views = ReadJson(dir / "two" / "q.json").at("views");
   for (const auto& v : own_views) {
