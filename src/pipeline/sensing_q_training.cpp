@@ -344,12 +344,13 @@ SensingQTrainReport TrainSensingQ(const sim::TaskSpec& twin, const SensingQTrain
   const sim::Task task(twin);
   const samrl::OrbitMount mount = samrl::ObjectsMount(task);
   const std::string twin_hash = TwinFingerprint(twin);
+  const samrl::RelookOptions relook = EpisodeRelook(options);
   const nlohmann::json header = {{"actor", "twin"},
                                  {"look", "a random view on the mount at each look"},
                                  {"max_looks", options.max_looks},
                                  {"look_aside", samrl::RelookOptions{}.look_aside},
-                                 {"measure_held", EpisodeRelook(options).measure_held},
-                                 {"refine", EpisodeRelook(options).refine},
+                                 {"measure_held", relook.measure_held},
+                                 {"refine", relook.refine},
                                  {"twin_hash", twin_hash},
                                  {"mount", MountJson(mount)},
                                  {"capture_scale", options.capture_scale}};

@@ -164,9 +164,9 @@ TEST(TrainSensingQ, RunsEpisodesResumesAndLoadsForItsTwinOnly) {
         after_first += ShareFound(look, "after");
         continue;
       }
-      for (const auto& [name, after] : look.at("after").items()) {
-        if (look.at("held") == name) continue;
-        const auto& before = look.at("objects").at(name);
+      for (const auto& [object, after] : look.at("after").items()) {
+        if (look.at("held") == object) continue;
+        const auto& before = look.at("objects").at(object);
         const double shift = std::hypot(after[0].get<double>() - before[0].get<double>(),
                                         after[1].get<double>() - before[1].get<double>());
         refined += shift > 1e-5 && shift < 0.0025;
